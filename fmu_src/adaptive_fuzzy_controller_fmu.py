@@ -1,0 +1,120 @@
+"""AdaptiveFuzzyController: the variable-universe direct adaptive fuzzy controller as an FMU.
+
+Pan, Er, Huang, Wang, IEEE Trans. Fuzzy Systems 19(5), 2011; SPEC.md sections 1-5, 9.
+The math is in ``afc_math``; this class only adapts it to FMI.
+
+Co-simulation semantics:
+* u (and E, dE, alpha1, alpha2) depend directly on the inputs at the same
+  communication point: after the master sets e, de, ym, dym, reading u
+  gives u for those inputs (computed on demand, no one-step delay).
+* doStep(t, h) advances theta (and w_hat for variant 3) over the step with
+  the inputs held at their values at t: the sampled-data update
+  ``theta += h * dtheta(t)`` (explicit Euler) that an embedded target runs.
+* e(0), de(0) of the modified error (Remark 3) are latched when
+  initialisation ends, from the inputs set by then.
+"""
+import math
+
+import afc_math
+# pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
+# so the project's base class is imported under that name.
+from afc_slave_base import INPUT, OUTPUT, PARAMETER, Variable, finite, non_negative, positive
+from afc_slave_base import TableSlave as Fmi2Slave
+
+DIMENSIONLESS = ""
+FEEDTHROUGH = ("e", "de", "ym", "dym")
+
+VARIABLES = (
+    Variable("variant", PARAMETER, 1, kind="Integer", minimum=1, maximum=3,
+             description="1 = vud (variable universes, proposed), 2 = fixed universes, "
+                         "3 = fixed universes + approximation-error estimator"),
+    Variable("fls_input", PARAMETER, 1, kind="Integer", minimum=1, maximum=2,
+             description="FLS input: 1 = modified error [E, dE], 2 = state [ym - e, dym - de]"),
+    positive("k1", 2.0, description="Hurwitz gain k1 of s^2 + k1 s + k2"),
+    positive("k2", 1.0, description="Hurwitz gain k2 of s^2 + k1 s + k2"),
+    positive("q1", 10.0, description="Q = diag(q1, q2) of the Lyapunov equation (30)"),
+    positive("q2", 10.0, description="Q = diag(q1, q2) of the Lyapunov equation (30)"),
+    positive("gamma", 300.0, description="learning rate gamma of the adaptive law (31)"),
+    positive("gamma_w", 300.0, description="learning rate of w_hat (variant 3)"),
+    positive("m_theta", 200.0, description="projection bound M_theta (31)"),
+    positive("delta", 5.0, description="projection boundary layer delta (31)"),
+    non_negative("lambda_e", 5.0, "1/s", "decay rate of the modified error (Remark 3); 0 = off"),
+    Variable("lambda_ce", PARAMETER, 0.99, description="contraction-expansion depth lambda (23)",
+             minimum=0.0, maximum=1.0, exclusive_minimum=True, exclusive_maximum=True),
+    positive("kappa1", 10.0, description="contraction-expansion width kappa_1 (23)"),
+    positive("kappa2", 10.0, description="contraction-expansion width kappa_2 (23)"),
+    positive("mf_slope", 7.0, description="slope s of the sigmoid membership functions"),
+    positive("E1", math.pi / 3, description="universe [-E1, E1] of FLS input 1"),
+    positive("E2", math.pi / 3, description="universe [-E2, E2] of FLS input 2"),
+    finite("theta0", 0.0, description="initial value of every theta_j"),
+    Variable("e", INPUT, 0.0, description="tracking error e = ym - y"),
+    Variable("de", INPUT, 0.0, description="tracking error rate de = dym - dy"),
+    Variable("ym", INPUT, 0.0, description="reference ym (used with fls_input = 2)"),
+    Variable("dym", INPUT, 0.0, description="reference rate dym (used with fls_input = 2)"),
+    Variable("u", OUTPUT, 0.0, description="control input u = theta^T xi (+ w_hat) (9)",
+             depends_on=FEEDTHROUGH),
+    Variable("E", OUTPUT, 0.0, description="modified tracking error E (Remark 3)", depends_on=("e", "de")),
+    Variable("dE", OUTPUT, 0.0, description="its time derivative dE", depends_on=("e", "de")),
+    Variable("alpha1", OUTPUT, 1.0, description="contraction-expansion factor of input 1 (23)",
+             depends_on=FEEDTHROUGH),
+    Variable("alpha2", OUTPUT, 1.0, description="contraction-expansion factor of input 2 (23)",
+             depends_on=FEEDTHROUGH),
+    Variable("theta1", OUTPUT, 0.0, description="rule weight theta_1 (rule (1,1))"),
+    Variable("theta2", OUTPUT, 0.0, description="rule weight theta_2 (rule (1,2))"),
+    Variable("theta3", OUTPUT, 0.0, description="rule weight theta_3 (rule (2,1))"),
+    Variable("theta4", OUTPUT, 0.0, description="rule weight theta_4 (rule (2,2))"),
+    Variable("w_hat", OUTPUT, 0.0, description="approximation-error estimate (variant 3; else 0)"),
+)
+
+
+class AdaptiveFuzzyController(Fmi2Slave):
+    VARIABLES = VARIABLES
+    STATE_ATTRIBUTES = ("e0", "de0", "p12", "p22", "xi")
+    MODEL_DESCRIPTION = ("Direct adaptive fuzzy controller with variable universes of discourse "
+                         "(Pan, Er, Huang, Wang, IEEE TFS 2011)")
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.e0 = self.de0 = 0.0
+        self.p12 = self.p22 = 0.0
+        self.xi = [0.25, 0.25, 0.25, 0.25]
+
+    def initialize(self, start_time):
+        _, self.p12, self.p22 = afc_math.lyapunov_p(self.k1, self.k2, self.q1, self.q2)
+        self.e0, self.de0 = self.e, self.de  # latched once (Remark 3)
+        self.theta1 = self.theta2 = self.theta3 = self.theta4 = float(self.theta0)
+        self.w_hat = 0.0
+
+    def compute_outputs(self):
+        lambda_e = self.lambda_e
+        e, de = self.e, self.de
+        error, error_rate = afc_math.modified_error(
+            e, de, self.time - self.start_time, self.e0, self.de0, lambda_e)
+        x1, x2 = afc_math.fls_inputs(e, de, self.ym, self.dym, error, error_rate, self.fls_input)
+        variant = self.variant
+        if variant == afc_math.VARIANT_VUD:
+            alpha1 = afc_math.contraction_factor(x1, self.lambda_ce, self.kappa1)
+            alpha2 = afc_math.contraction_factor(x2, self.lambda_ce, self.kappa2)
+        else:
+            alpha1 = alpha2 = 1.0
+        xi = afc_math.fuzzy_basis(afc_math.normalized_input(x1, alpha1, self.E1),
+                                  afc_math.normalized_input(x2, alpha2, self.E2), self.mf_slope)
+        u = self.theta1 * xi[0] + self.theta2 * xi[1] + self.theta3 * xi[2] + self.theta4 * xi[3]
+        if variant == afc_math.VARIANT_FAE:
+            u += self.w_hat
+        self.u, self.E, self.dE, self.alpha1, self.alpha2 = u, error, error_rate, alpha1, alpha2
+        self.xi = list(xi)
+        self.outputs_stale = False
+
+    def step(self, current_time, step_size):
+        tau = afc_math.adaptation_signal(self.E, self.dE, self.p12, self.p22)
+        gamma, m_theta, delta = self.gamma, self.m_theta, self.delta
+        rate = afc_math.projected_rate
+        xi = self.xi
+        self.theta1 += step_size * rate(self.theta1, tau, xi[0], gamma, m_theta, delta)
+        self.theta2 += step_size * rate(self.theta2, tau, xi[1], gamma, m_theta, delta)
+        self.theta3 += step_size * rate(self.theta3, tau, xi[2], gamma, m_theta, delta)
+        self.theta4 += step_size * rate(self.theta4, tau, xi[3], gamma, m_theta, delta)
+        if self.variant == afc_math.VARIANT_FAE:
+            self.w_hat += step_size * self.gamma_w * tau
+        return True

@@ -1,0 +1,294 @@
+"""One shared base for every pythonfmu slave of the project.
+
+Each FMU declares its variables once, in a table of :class:`Variable` rows
+(name, causality, start, valid range, unit, meaning, direct dependencies).
+From that table this module derives
+
+* the pythonfmu registration (value references in table order),
+* the modelDescription.xml details pythonfmu 0.7 does not write: units,
+  the ``dependencies`` of each output and the ``InitialUnknowns``,
+* the validation of parameters when initialisation ends,
+* the Markdown variable tables of the README (:func:`markdown_table`).
+
+The per-step path (``set_real``, ``get_real``, ``do_step``) is written for
+speed: value references index plain lists, values live in the instance
+``__dict__`` and outputs are recomputed lazily, once after their inputs or
+the state changed.  A model subclass implements only
+
+* ``initialize(start_time)``   state at the end of initialisation,
+* ``compute_outputs()``        outputs from state and inputs, no side effect
+  on the state (FMI: reading an output has no side effect),
+* ``step(time, step_size)``    advance the state over one communication step.
+
+This file travels inside every FMU as a project file and so imports only
+the standard library and pythonfmu.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from xml.etree.ElementTree import Element, SubElement
+
+from pythonfmu import Fmi2Slave
+from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variability
+from pythonfmu.variables import Integer, Real
+
+PARAMETER = "parameter"
+INPUT = "input"
+OUTPUT = "output"
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One row of an FMU's variable table."""
+
+    name: str
+    causality: str  # PARAMETER, INPUT or OUTPUT
+    start: float
+    unit: str = ""
+    description: str = ""
+    kind: str = "Real"  # "Real" or "Integer"
+    minimum: float | None = None  # lower bound of the valid range (parameters)
+    maximum: float | None = None  # upper bound of the valid range (parameters)
+    exclusive_minimum: bool = False  # True: the value must be > minimum
+    exclusive_maximum: bool = False  # True: the value must be < maximum
+    depends_on: tuple[str, ...] = ()  # outputs: inputs with direct feedthrough
+
+    def valid_range(self) -> str:
+        """The valid range as text, e.g. ``(0, 1)``, ``> 0``, ``{1, 2, 3}``."""
+        if self.kind == "Integer" and self.minimum is not None and self.maximum is not None:
+            return "{" + ", ".join(str(i) for i in range(int(self.minimum), int(self.maximum) + 1)) + "}"
+        low, high = self.minimum, self.maximum
+        if low is not None and high is not None:
+            return (("(" if self.exclusive_minimum else "[") + f"{low:g}, {high:g}"
+                    + (")" if self.exclusive_maximum else "]"))
+        if low is not None:
+            return (">" if self.exclusive_minimum else ">=") + f" {low:g}"
+        if high is not None:
+            return ("<" if self.exclusive_maximum else "<=") + f" {high:g}"
+        return "finite"
+
+    def check(self, value) -> str | None:
+        """None if ``value`` is valid, else an error message naming it."""
+        bad = not math.isfinite(value)
+        if not bad and self.kind == "Integer" and value != int(value):
+            bad = True
+        if not bad and self.minimum is not None:
+            bad = value <= self.minimum if self.exclusive_minimum else value < self.minimum
+        if not bad and self.maximum is not None:
+            bad = value >= self.maximum if self.exclusive_maximum else value > self.maximum
+        if bad:
+            return f"parameter {self.name} = {value!r} is invalid; valid range: {self.valid_range()}"
+        return None
+
+
+def positive(name, start, unit="", description=""):
+    """A Real parameter that must be > 0."""
+    return Variable(name, PARAMETER, start, unit, description, minimum=0.0, exclusive_minimum=True)
+
+
+def non_negative(name, start, unit="", description=""):
+    """A Real parameter that must be >= 0."""
+    return Variable(name, PARAMETER, start, unit, description, minimum=0.0)
+
+
+def finite(name, start, unit="", description=""):
+    """A Real parameter that may take any finite value."""
+    return Variable(name, PARAMETER, start, unit, description)
+
+
+def markdown_table(variables) -> str:
+    """The README table of an FMU's variables."""
+    lines = ["| name | causality | type | start | valid range | unit | meaning |",
+             "|---|---|---|---|---|---|---|"]
+    for v in variables:
+        valid = v.valid_range() if v.causality == PARAMETER else ""
+        if v.causality == OUTPUT:
+            valid = "depends on " + (", ".join(v.depends_on) if v.depends_on else "no input")
+        start = f"{v.start:.6g}" if v.causality != OUTPUT else ""
+        lines.append(f"| `{v.name}` | {v.causality} | {v.kind} | {start} | {valid} | {v.unit} | {v.description} |")
+    return "\n".join(lines)
+
+
+class FmuModelError(RuntimeError):
+    """Raised inside an FMU call; the pythonfmu wrapper reports it to the host."""
+
+
+class TableSlave(Fmi2Slave):
+    """Base of the project's slaves: registration, validation, fast I/O, state."""
+
+    VARIABLES: tuple[Variable, ...] = ()
+    #: attribute names of internal state that is not a registered variable
+    STATE_ATTRIBUTES: tuple[str, ...] = ()
+    MODEL_DESCRIPTION = ""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.description = self.MODEL_DESCRIPTION
+        self.author = "afc-fmi project"
+        self.version = "0.1.0"
+        self.start_time = 0.0
+        self.time = 0.0
+        self.initialized = False
+        self.outputs_stale = True
+        names = [v.name for v in self.VARIABLES]
+        if len(set(names)) != len(names):
+            raise ValueError(f"{type(self).__name__}: duplicate variable names in table")
+        # value reference -> attribute name, for the lean set/get path
+        self._names_by_vr = names
+        self._settable = [v.causality != OUTPUT for v in self.VARIABLES]
+        self._inputs = [v.causality == INPUT for v in self.VARIABLES]
+        for v in self.VARIABLES:
+            setattr(self, v.name, int(v.start) if v.kind == "Integer" else float(v.start))
+            self._register(v)
+
+    def _register(self, v: Variable):
+        if v.causality == PARAMETER:
+            options = dict(causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed)
+        elif v.causality == INPUT:
+            options = dict(causality=Fmi2Causality.input, variability=Fmi2Variability.continuous)
+        else:
+            options = dict(causality=Fmi2Causality.output, initial=Fmi2Initial.calculated,
+                           variability=Fmi2Variability.continuous)
+        cls = Integer if v.kind == "Integer" else Real
+        if cls is Integer and v.causality == OUTPUT:
+            options["variability"] = Fmi2Variability.discrete
+        self.register_variable(cls(v.name, description=v.description or None, **options))
+
+    # ---------------------------------------------------------------- XML
+    def to_xml(self, model_options=dict()):
+        """pythonfmu's description plus units, dependencies and InitialUnknowns."""
+        root = super().to_xml(model_options)
+        index = {v.name: i + 1 for i, v in enumerate(self.VARIABLES)}
+        units = sorted({v.unit for v in self.VARIABLES if v.unit})
+        for element, v in zip(root.find("ModelVariables"), self.VARIABLES):
+            typed = element[0]
+            if v.unit:
+                typed.set("unit", v.unit)
+            if v.causality == PARAMETER and v.minimum is not None and not v.exclusive_minimum:
+                typed.set("min", str(int(v.minimum)) if v.kind == "Integer" else f"{v.minimum:.16g}")
+            if v.causality == PARAMETER and v.maximum is not None and not v.exclusive_maximum:
+                typed.set("max", str(int(v.maximum)) if v.kind == "Integer" else f"{v.maximum:.16g}")
+        if units:
+            unit_definitions = Element("UnitDefinitions")
+            for unit in units:
+                SubElement(unit_definitions, "Unit", name=unit)
+            position = list(root).index(root.find("CoSimulation")) + 1
+            root.insert(position, unit_definitions)
+        structure = root.find("ModelStructure")
+        for child in list(structure):
+            structure.remove(child)
+        outputs = [v for v in self.VARIABLES if v.causality == OUTPUT]
+        if outputs:
+            outputs_node = SubElement(structure, "Outputs")
+            for v in outputs:
+                unknown_dependencies = [n for n in v.depends_on if n not in index]
+                if unknown_dependencies:
+                    raise ValueError(f"{v.name} depends on unknown {unknown_dependencies}")
+                SubElement(outputs_node, "Unknown", index=str(index[v.name]),
+                           dependencies=" ".join(str(index[n]) for n in v.depends_on))
+            initial_node = SubElement(structure, "InitialUnknowns")
+            for v in outputs:
+                SubElement(initial_node, "Unknown", index=str(index[v.name]))
+        return root
+
+    # ---------------------------------------------------------- life cycle
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        self.start_time = float(start_time)
+        self.time = float(start_time)
+
+    def exit_initialization_mode(self):
+        errors = [message for message in
+                  (v.check(getattr(self, v.name)) for v in self.VARIABLES if v.causality == PARAMETER)
+                  if message]
+        if errors:
+            self.fail("; ".join(errors))
+        self.time = self.start_time
+        self.initialize(self.start_time)
+        self.initialized = True
+        self.outputs_stale = True
+
+    def fail(self, message: str):
+        """Log ``message`` as an error for the host and abort the FMI call."""
+        self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
+        raise FmuModelError(message)
+
+    def do_step(self, current_time, step_size):
+        if self.outputs_stale:
+            self.compute_outputs()
+        ok = self.step(current_time, step_size)
+        self.time = current_time + step_size
+        self.outputs_stale = True
+        return ok is not False
+
+    # ------------------------------------------------------- model hooks
+    def initialize(self, start_time: float) -> None:
+        """Set the internal state once the parameters and start inputs are known."""
+
+    def compute_outputs(self) -> None:
+        """Set every output attribute from state and inputs."""
+        self.outputs_stale = False
+
+    def step(self, current_time: float, step_size: float):
+        """Advance the state from current_time by step_size; False means discard."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------ lean value I/O
+    def set_real(self, vrs, values):
+        attributes = self.__dict__
+        names = self._names_by_vr
+        settable = self._settable
+        for vr, value in zip(vrs, values):
+            if value - value != 0.0:  # NaN or +-inf
+                self.fail(f"input {names[vr]} = {value!r} is not finite")
+            if not settable[vr]:
+                self.fail(f"{names[vr]} is an output and cannot be set")
+            attributes[names[vr]] = value
+        self.outputs_stale = True
+
+    def get_real(self, vrs):
+        if self.outputs_stale and self.initialized:
+            self.compute_outputs()
+        attributes = self.__dict__
+        names = self._names_by_vr
+        return [attributes[names[vr]] for vr in vrs]
+
+    def set_integer(self, vrs, values):
+        for vr, value in zip(vrs, values):
+            if not self._settable[vr]:
+                self.fail(f"{self._names_by_vr[vr]} is an output and cannot be set")
+            setattr(self, self._names_by_vr[vr], int(value))
+        self.outputs_stale = True
+
+    def get_integer(self, vrs):
+        return [int(getattr(self, self._names_by_vr[vr])) for vr in vrs]
+
+    # ---------------------------------------------------------- FMU state
+    def _state_names(self):
+        return (*self._names_by_vr, *self.STATE_ATTRIBUTES,
+                "time", "start_time", "initialized")
+
+    def _get_fmu_state(self):
+        """The whole internal state, not only registered variables."""
+        attributes = self.__dict__
+        return {name: _copy(attributes[name]) for name in self._state_names()}
+
+    def _set_fmu_state(self, state):
+        attributes = self.__dict__
+        for name in self._state_names():
+            attributes[name] = _copy(state[name])
+        self.outputs_stale = True
+
+    @staticmethod
+    def _fmu_state_to_bytes(state) -> bytes:
+        # repr-based JSON floats round-trip exactly
+        return json.dumps(state, allow_nan=True).encode("utf-8")
+
+    @staticmethod
+    def _fmu_state_from_bytes(state: bytes):
+        return json.loads(state.decode("utf-8"))
+
+
+def _copy(value):
+    return list(value) if isinstance(value, (list, tuple)) else value
