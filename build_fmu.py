@@ -40,6 +40,13 @@ class FmuSource:
 FMUS = (
     FmuSource("AdaptiveFuzzyController", ROOT / "fmu_src" / "adaptive_fuzzy_controller_fmu.py",
               (BASE, ROOT / "fmu_src" / "afc_math.py")),
+    FmuSource("InvertedPendulum", ROOT / "plants" / "inverted_pendulum_fmu.py",
+              (BASE, ROOT / "plants" / "inverted_pendulum_model.py",
+               ROOT / "plants" / "plant_integration.py")),
+    FmuSource("Manipulator", ROOT / "plants" / "manipulator_fmu.py",
+              (BASE, ROOT / "plants" / "manipulator_model.py",
+               ROOT / "plants" / "plant_integration.py")),
+    FmuSource("TrackingReference", ROOT / "plants" / "tracking_reference_fmu.py", (BASE,)),
 )
 
 
@@ -73,18 +80,26 @@ def ensure_built(force: bool = False, verbose: bool = False) -> dict[str, Path]:
     return paths
 
 
+def model_class(model_identifier: str):
+    """The slave class of an FMU, imported as the FMU imports it (top-level modules)."""
+    fmu = next((f for f in FMUS if f.model_identifier == model_identifier), None)
+    if fmu is None:
+        raise KeyError(f"unknown FMU {model_identifier!r}; valid: {[f.model_identifier for f in FMUS]}")
+    for folder in {str(p.parent) for p in fmu.sources}:
+        if folder not in sys.path:
+            sys.path.insert(0, folder)
+    return getattr(importlib.import_module(fmu.script.stem), model_identifier)
+
+
 def variable_tables() -> str:
     """The README's variable tables, generated from each FMU's declaration."""
+    from fmu_src.afc_slave_base import markdown_table
+
     parts = []
     for fmu in FMUS:
-        for folder in {str(p.parent) for p in fmu.sources}:
-            if folder not in sys.path:
-                sys.path.insert(0, folder)
-        module = importlib.import_module(fmu.script.stem)
-        base = importlib.import_module("afc_slave_base")
-        model = getattr(module, fmu.model_identifier)
+        model = model_class(fmu.model_identifier)
         parts.append(f"#### `{fmu.model_identifier}`\n\n{model.MODEL_DESCRIPTION}.\n\n"
-                     f"{base.markdown_table(model.VARIABLES)}\n")
+                     f"{markdown_table(model.VARIABLES)}\n")
     return "\n".join(parts)
 
 

@@ -25,6 +25,7 @@ the standard library and pythonfmu.
 """
 from __future__ import annotations
 
+import ctypes
 import json
 import math
 from dataclasses import dataclass
@@ -115,6 +116,41 @@ class FmuModelError(RuntimeError):
     """Raised inside an FMU call; the pythonfmu wrapper reports it to the host."""
 
 
+_py_incref = ctypes.pythonapi.Py_IncRef
+_py_incref.argtypes = [ctypes.py_object]
+_py_incref.restype = None
+
+
+def _outlive_pythonfmu_cleanup(slave) -> None:
+    """Keep the instance alive through pythonfmu 0.7's error path.
+
+    On any Python exception, pythonfmu 0.7's C wrapper (``handle_py_exception``
+    -> ``cleanPyObject``) releases its references to the instance, its class
+    and its log queue, and releases them once more when the host frees the
+    instance: a double release that crashes the host process a few calls
+    later.  Taking one extra reference to each before the exception leaves
+    the wrapper balanced, so the host can free the instance and go on.
+    """
+    for owned in (slave, type(slave), slave.log_queue):
+        _py_incref(owned)
+
+
+def _fmi_entry(method):
+    """Guard an FMI entry point that is not on the per-step path (see above)."""
+    def guarded(self, *args):
+        try:
+            return method(self, *args)
+        except BaseException as error:
+            if not isinstance(error, FmuModelError):
+                self.log(f"{self.instance_name}: {type(error).__name__} in {method.__name__}: {error}",
+                         Fmi2Status.error)
+            _outlive_pythonfmu_cleanup(self)
+            raise
+    guarded.__name__ = method.__name__
+    guarded.__doc__ = method.__doc__
+    return guarded
+
+
 class TableSlave(Fmi2Slave):
     """Base of the project's slaves: registration, validation, fast I/O, state."""
 
@@ -194,10 +230,12 @@ class TableSlave(Fmi2Slave):
         return root
 
     # ---------------------------------------------------------- life cycle
+    @_fmi_entry
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         self.start_time = float(start_time)
         self.time = float(start_time)
 
+    @_fmi_entry
     def exit_initialization_mode(self):
         errors = [message for message in
                   (v.check(getattr(self, v.name)) for v in self.VARIABLES if v.causality == PARAMETER)
@@ -209,15 +247,34 @@ class TableSlave(Fmi2Slave):
         self.initialized = True
         self.outputs_stale = True
 
+    @_fmi_entry
+    def enter_initialization_mode(self):
+        pass
+
+    @_fmi_entry
+    def terminate(self):
+        pass
+
     def fail(self, message: str):
         """Log ``message`` as an error for the host and abort the FMI call."""
         self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
         raise FmuModelError(message)
 
+    def _crashed(self, where: str, error: BaseException):
+        """The error path of the per-step entry points (kept out of their bodies)."""
+        if not isinstance(error, FmuModelError):
+            self.log(f"{self.instance_name}: {type(error).__name__} in {where} at t = {self.time!r}: {error}",
+                     Fmi2Status.error)
+        _outlive_pythonfmu_cleanup(self)
+
     def do_step(self, current_time, step_size):
-        if self.outputs_stale:
-            self.compute_outputs()
-        ok = self.step(current_time, step_size)
+        try:
+            if self.outputs_stale:
+                self.compute_outputs()
+            ok = self.step(current_time, step_size)
+        except BaseException as error:
+            self._crashed("do_step", error)
+            raise
         self.time = current_time + step_size
         self.outputs_stale = True
         return ok is not False
@@ -239,28 +296,44 @@ class TableSlave(Fmi2Slave):
         attributes = self.__dict__
         names = self._names_by_vr
         settable = self._settable
-        for vr, value in zip(vrs, values):
-            if value - value != 0.0:  # NaN or +-inf
-                self.fail(f"input {names[vr]} = {value!r} is not finite")
-            if not settable[vr]:
-                self.fail(f"{names[vr]} is an output and cannot be set")
-            attributes[names[vr]] = value
+        try:
+            for vr, value in zip(vrs, values):
+                if value - value != 0.0 or not settable[vr]:  # NaN, +-inf, or an output
+                    self._reject(vr, value)
+                attributes[names[vr]] = value
+        except BaseException as error:
+            self._crashed("set_real", error)
+            raise
         self.outputs_stale = True
 
-    def get_real(self, vrs):
-        if self.outputs_stale and self.initialized:
-            self.compute_outputs()
-        attributes = self.__dict__
-        names = self._names_by_vr
-        return [attributes[names[vr]] for vr in vrs]
+    def _reject(self, vr, value):
+        variable = self.VARIABLES[vr]
+        if variable.causality == OUTPUT:
+            self.fail(f"{variable.name} is an output and cannot be set")
+        if variable.causality == PARAMETER:
+            self.fail(variable.check(value))
+        self.fail(f"input {variable.name} = {value!r} is not finite")
 
+    def get_real(self, vrs):
+        try:
+            if self.outputs_stale and self.initialized:
+                self.compute_outputs()
+            attributes = self.__dict__
+            names = self._names_by_vr
+            return [attributes[names[vr]] for vr in vrs]
+        except BaseException as error:
+            self._crashed("get_real", error)
+            raise
+
+    @_fmi_entry
     def set_integer(self, vrs, values):
         for vr, value in zip(vrs, values):
             if not self._settable[vr]:
-                self.fail(f"{self._names_by_vr[vr]} is an output and cannot be set")
+                self._reject(vr, value)
             setattr(self, self._names_by_vr[vr], int(value))
         self.outputs_stale = True
 
+    @_fmi_entry
     def get_integer(self, vrs):
         return [int(getattr(self, self._names_by_vr[vr])) for vr in vrs]
 
@@ -269,11 +342,13 @@ class TableSlave(Fmi2Slave):
         return (*self._names_by_vr, *self.STATE_ATTRIBUTES,
                 "time", "start_time", "initialized")
 
+    @_fmi_entry
     def _get_fmu_state(self):
         """The whole internal state, not only registered variables."""
         attributes = self.__dict__
         return {name: _copy(attributes[name]) for name in self._state_names()}
 
+    @_fmi_entry
     def _set_fmu_state(self, state):
         attributes = self.__dict__
         for name in self._state_names():

@@ -1,0 +1,177 @@
+"""Every FMI call of the harness, in one module (as fmpy keeps its own).
+
+:class:`Component` wraps one FMI 2.0 co-simulation instance loaded through
+fmpy's low-level ``FMU2Slave``.  Life-cycle calls go through fmpy (which
+raises ``FMICallException`` on a status >= error); the per-step calls
+(``set_reals``, ``get_reals``, ``do_step``) use fmpy's raw ctypes functions
+with value-reference and value arrays prepared once, and return the FMI
+status so the caller decides, without allocation or exceptions per step.
+"""
+from __future__ import annotations
+
+import ctypes
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Real,
+                       fmi2ValueReference)
+from fmpy.fmi2 import defaultCallbacks as _fmpy_default_callbacks
+
+STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal", "pending")
+FMI_ERROR = 3
+
+
+class FmiError(RuntimeError):
+    """An FMI call returned a status >= error: names instance, function, time and log."""
+
+    def __init__(self, instance: str, function: str, status: int, time: float, log: list[str]):
+        self.instance, self.function, self.status, self.time, self.log = instance, function, status, time, log
+        label = STATUS_NAMES[status] if 0 <= status < len(STATUS_NAMES) else str(status)
+        text = f"{instance}: {function} returned {label} at t = {time:.6g}"
+        if log:
+            text += "\n  FMU log:\n" + "\n".join(f"    {line}" for line in log)
+        super().__init__(text)
+
+
+@dataclass
+class ModelInfo:
+    """What the master needs of a modelDescription.xml."""
+
+    path: Path
+    model_identifier: str
+    guid: str
+    variables: dict  # name -> fmpy ScalarVariable
+    direct_dependencies: dict  # output name -> tuple of input names it depends on directly
+    can_get_set_state: bool
+
+    @classmethod
+    def read(cls, path) -> "ModelInfo":
+        path = Path(path)
+        if not path.exists():
+            raise FileNotFoundError(f"FMU file not found: {path}")
+        md = read_model_description(str(path))
+        if md.coSimulation is None:
+            raise ValueError(f"{path.name} is not a co-simulation FMU")
+        variables = {v.name: v for v in md.modelVariables}
+        inputs = tuple(v.name for v in md.modelVariables if v.causality == "input")
+        dependencies = {}
+        for unknown in md.outputs:
+            if unknown.dependencies is None:
+                # FMI 2.0: no dependencies attribute means "depends on every input"
+                dependencies[unknown.variable.name] = inputs
+            else:
+                dependencies[unknown.variable.name] = tuple(
+                    d.name for d in unknown.dependencies if d.causality == "input")
+        return cls(path, md.coSimulation.modelIdentifier, md.guid, variables, dependencies,
+                   bool(md.coSimulation.canGetAndSetFMUstate))
+
+
+@dataclass
+class Component:
+    """One FMU instance; the fast per-step interface of the master."""
+
+    name: str
+    info: ModelInfo
+    unzip_dir: str = ""
+    log: list = field(default_factory=list)
+    time: float = 0.0
+
+    def instantiate(self, logging_on: bool = False):
+        self.unzip_dir = extract(str(self.info.path), tempfile.mkdtemp(prefix=f"afc_{self.name}_"))
+        self.slave = FMU2Slave(guid=self.info.guid, unzipDirectory=self.unzip_dir,
+                               modelIdentifier=self.info.model_identifier, instanceName=self.name)
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(self._log_message)
+        callbacks.allocateMemory = _fmpy_default_callbacks.allocateMemory
+        callbacks.freeMemory = _fmpy_default_callbacks.freeMemory
+        self._callbacks = callbacks  # keep alive while the instance lives
+        self._call("fmi2Instantiate", lambda: self.slave.instantiate(callbacks=callbacks, loggingOn=logging_on))
+        functions = self.slave._functions
+        self._raw_set_real = functions["fmi2SetReal"]
+        self._raw_get_real = functions["fmi2GetReal"]
+        self._raw_do_step = functions["fmi2DoStep"]
+        self._component = self.slave.component
+        return self
+
+    def _log_message(self, env, instance, status, category, message):
+        label = STATUS_NAMES[status].upper() if 0 <= status < len(STATUS_NAMES) else str(status)
+        self.log.append(f"[{label}] {message.decode('utf-8', 'replace')}")
+
+    def _call(self, function: str, call):
+        try:
+            return call()
+        except Exception as error:  # fmpy raises FMICallException or a plain Exception
+            status = getattr(error, "status", FMI_ERROR)
+            raise FmiError(self.name, function, status, self.time, list(self.log)) from error
+
+    # ------------------------------------------------------------ life cycle
+    def value_reference(self, name: str) -> int:
+        return self.info.variables[name].valueReference
+
+    def setup(self, start_time: float, stop_time: float | None = None):
+        self.time = start_time
+        self._call("fmi2SetupExperiment", lambda: self.slave.setupExperiment(startTime=start_time, stopTime=stop_time))
+        self._call("fmi2EnterInitializationMode", self.slave.enterInitializationMode)
+
+    def set_parameters(self, values: dict):
+        for name, value in values.items():
+            variable = self.info.variables[name]
+            vr = [variable.valueReference]
+            if variable.type == "Integer":
+                self._call("fmi2SetInteger", lambda: self.slave.setInteger(vr, [int(value)]))
+            elif variable.type == "Boolean":
+                self._call("fmi2SetBoolean", lambda: self.slave.setBoolean(vr, [bool(value)]))
+            else:
+                self._call("fmi2SetReal", lambda: self.slave.setReal(vr, [float(value)]))
+
+    def exit_initialization(self):
+        self._call("fmi2ExitInitializationMode", self.slave.exitInitializationMode)
+
+    def get_state(self):
+        return self._call("fmi2GetFMUstate", self.slave.getFMUstate)
+
+    def set_state(self, state):
+        self._call("fmi2SetFMUstate", lambda: self.slave.setFMUstate(state))
+
+    def free(self):
+        try:
+            self.slave.terminate()
+        except Exception:
+            pass
+        try:
+            self.slave.freeInstance()
+        finally:
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+
+    # -------------------------------------------------------------- per step
+    def real_buffer(self, names) -> tuple:
+        """(value-reference array, value array, count) for a fixed list of Real variables."""
+        count = len(names)
+        references = (fmi2ValueReference * count)(*[self.value_reference(n) for n in names])
+        values = (fmi2Real * count)()
+        return references, values, count
+
+    def set_reals(self, references, values, count) -> int:
+        return self._raw_set_real(self._component, references, count, values)
+
+    def get_reals(self, references, values, count) -> int:
+        return self._raw_get_real(self._component, references, count, values)
+
+    def do_step(self, time: float, step: float) -> int:
+        return self._raw_do_step(self._component, time, step, 1)
+
+    def fail(self, function: str, status: int, time: float):
+        """Raise the FmiError for a status >= error returned by a per-step call."""
+        self.time = time
+        raise FmiError(self.name, function, status, time, list(self.log))
+
+
+def as_array(values, count):
+    """A ctypes Real array from a Python sequence (tests and set-up code)."""
+    return (fmi2Real * count)(*values)
+
+
+__all__ = ["Component", "FmiError", "ModelInfo", "as_array", "ctypes"]

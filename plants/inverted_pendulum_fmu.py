@@ -1,0 +1,101 @@
+"""InvertedPendulum: the inverted pendulum on a cart (37) as a co-simulation FMU.
+
+SPEC.md sections 6 and 9.  The model equations are in
+``inverted_pendulum_model``, the integrator in ``plant_integration``; this
+class only adapts them to FMI.
+
+Co-simulation semantics:
+* y, dy are the states x1, x2 and d the disturbance d(t), all at the
+  current communication time; no output depends directly on u, so a
+  closed loop through this FMU has no algebraic loop.
+* In initialization mode the outputs already follow x1_start, x2_start (and d
+  the start time), so a master can propagate initial values before the
+  controller latches e(0), de(0) at the end of initialisation.
+* doStep(t, h) holds u over [t, t + h] and integrates with classical RK4 in
+  ceil(h / max_internal_step) equal internal steps.
+"""
+import math
+
+import inverted_pendulum_model as model
+import plant_integration
+# pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
+# so the project's base class is imported under that name.
+from afc_slave_base import INPUT, OUTPUT, Variable, finite, positive
+from afc_slave_base import TableSlave as Fmi2Slave
+
+VARIABLES = (
+    positive("gv", 9.8, "m/s2", "gravitational acceleration"),
+    positive("mc", 1.0, "kg", "cart mass"),
+    positive("mp", 0.1, "kg", "pole mass (case 3: 1)"),
+    positive("lp", 0.5, "m", "pole half-length"),
+    finite("x1_start", math.pi / 12, "rad", "initial pole angle x1(0)"),
+    finite("x2_start", 0.0, "rad/s", "initial pole rate x2(0)"),
+    finite("dist_gain", 0.0, "", "gain of d(t) = 3 cos 2t + 2 sin((0.09 t + 1) t): "
+                                 "0 case 1, 1 cases 2 and 3"),
+    positive("max_internal_step", 1e-4, "s", "largest internal RK4 step"),
+    Variable("u", INPUT, 0.0, "N", "force on the cart (held over each communication step)"),
+    Variable("y", OUTPUT, math.pi / 12, "rad", "pole angle x1 (from the vertical)"),
+    Variable("dy", OUTPUT, 0.0, "rad/s", "pole rate x2"),
+    Variable("d", OUTPUT, 0.0, "rad/s2", "disturbance d(t) added to dx2"),
+)
+
+
+class InvertedPendulum(Fmi2Slave):
+    VARIABLES = VARIABLES
+    STATE_ATTRIBUTES = ("x1", "x2")
+    MODEL_DESCRIPTION = ("Inverted pendulum on a cart, eq. (37) of Pan, Er, Huang, Wang "
+                         "(IEEE TFS 2011), with additive disturbance d(t), fixed-step RK4")
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.x1 = self.x1_start
+        self.x2 = self.x2_start
+        self._params = model.pendulum_params(self.gv, self.mc, self.mp, self.lp, self.dist_gain)
+
+    def initialize(self, start_time):
+        self.x1 = float(self.x1_start)
+        self.x2 = float(self.x2_start)
+        self._update_params()
+
+    def _update_params(self):
+        self._params = model.pendulum_params(self.gv, self.mc, self.mp, self.lp, self.dist_gain)
+
+    def _set_fmu_state(self, state):
+        super()._set_fmu_state(state)
+        self._update_params()  # the derived constants follow the restored parameters
+
+    def compute_outputs(self):
+        self.y = self.x1
+        self.dy = self.x2
+        self.d = model.pendulum_disturbance(self.time, self.dist_gain)
+        self.outputs_stale = False
+
+    def get_real(self, vrs):
+        if not self.initialized:
+            # Initialization mode (y, dy, d are InitialUnknowns): the outputs follow the
+            # start values set so far, so that a master propagating initial values hands
+            # the reference and the controller the true e(0), de(0).
+            self.y = self.x1_start
+            self.dy = self.x2_start
+            self.d = model.pendulum_disturbance(self.time, self.dist_gain)
+        return Fmi2Slave.get_real(self, vrs)
+
+    def step(self, current_time, step_size):
+        if step_size < 0.0:
+            self.fail(f"doStep with negative communication step {step_size!r}")
+        try:
+            x1, x2 = plant_integration.rk4_advance(
+                model.pendulum_derivative, current_time, self.x1, self.x2, self.u,
+                step_size, self.max_internal_step, self._params)
+        except (ArithmeticError, ValueError) as error:  # overflow, math domain error
+            x1 = x2 = math.nan
+            reason = f" ({error})"
+        else:
+            reason = ""
+        if x1 - x1 != 0.0 or x2 - x2 != 0.0:  # NaN or inf
+            self.fail(f"state diverged in doStep(t={current_time!r}, h={step_size!r}) "
+                      f"from x1={self.x1!r}, x2={self.x2!r} with u={self.u!r}{reason}; "
+                      "the closed loop is unstable at this step size")
+        self.x1 = x1
+        self.x2 = x2
+        return True

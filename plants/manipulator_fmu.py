@@ -1,0 +1,116 @@
+"""Manipulator: the single-link manipulator with friction (38, 39) as a co-simulation FMU.
+
+SPEC.md sections 6 and 9.  The model equations are in ``manipulator_model``,
+the integrator in ``plant_integration``; this class only adapts them to FMI.
+
+Co-simulation semantics:
+* y, dy are the states x1, x2, d the friction term -(sgn(x2) cr + vr x2)/J
+  and mr the payload mr(t), all at the current communication time; no
+  output depends directly on u, so a closed loop through this FMU has no
+  algebraic loop.
+* In initialization mode the outputs already follow x1_start, x2_start (and
+  the start time), so a master can propagate initial values before the
+  controller latches e(0), de(0) at the end of initialisation.
+* doStep(t, h) holds u over [t, t + h] and integrates with classical RK4 in
+  ceil(h / max_internal_step) equal internal steps, with no event handling
+  at x2 = 0 (see ``manipulator_model``: first-order convergence where the
+  Coulomb friction switches or the arm sticks).
+"""
+import math
+
+import manipulator_model as model
+import plant_integration
+# pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
+# so the project's base class is imported under that name.
+from afc_slave_base import INPUT, OUTPUT, Variable, finite, non_negative, positive
+from afc_slave_base import TableSlave as Fmi2Slave
+
+VARIABLES = (
+    positive("gv", 9.8, "m/s2", "gravitational acceleration"),
+    positive("lr", 0.25, "m", "link length"),
+    non_negative("dr", 2.0, "N.m.s/rad", "joint damping coefficient"),
+    non_negative("cr", 1.5, "N.m", "Coulomb friction torque"),
+    non_negative("vr", 0.3, "N.m.s/rad", "viscous friction coefficient"),
+    positive("mr0", 5.0, "kg", "mean payload mass: mr(t) = mr0 + mr1 sin t"),
+    non_negative("mr1", 4.0, "kg", "payload variation amplitude, must be < mr0"),
+    finite("x1_start", math.pi / 6, "rad", "initial link angle x1(0)"),
+    finite("x2_start", 0.0, "rad/s", "initial link rate x2(0)"),
+    positive("max_internal_step", 1e-4, "s", "largest internal RK4 step"),
+    Variable("u", INPUT, 0.0, "N.m", "joint torque (held over each communication step)"),
+    Variable("y", OUTPUT, math.pi / 6, "rad", "link angle x1"),
+    Variable("dy", OUTPUT, 0.0, "rad/s", "link rate x2"),
+    Variable("d", OUTPUT, 0.0, "rad/s2", "friction term d = -(sgn(x2) cr + vr x2)/J in dx2"),
+    Variable("mr", OUTPUT, 5.0, "kg", "payload mass mr(t) = mr0 + mr1 sin t"),
+)
+
+
+class Manipulator(Fmi2Slave):
+    VARIABLES = VARIABLES
+    STATE_ATTRIBUTES = ("x1", "x2")
+    MODEL_DESCRIPTION = ("Single-link manipulator with Coulomb and viscous friction and a varying "
+                         "payload, eqs. (38, 39) of Pan, Er, Huang, Wang (IEEE TFS 2011), "
+                         "fixed-step RK4")
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.x1 = self.x1_start
+        self.x2 = self.x2_start
+        self._update_params()
+
+    def _update_params(self):
+        self._params = model.manipulator_params(self.gv, self.lr, self.dr, self.cr, self.vr,
+                                                self.mr0, self.mr1)
+
+    def initialize(self, start_time):
+        if not self.mr1 < self.mr0:
+            self.fail(f"parameter mr1 = {self.mr1!r} is invalid; valid range: 0 <= mr1 < mr0 "
+                      f"= {self.mr0!r} (the payload mr(t) = mr0 + mr1 sin t must stay > 0)")
+        self.x1 = float(self.x1_start)
+        self.x2 = float(self.x2_start)
+        self._update_params()
+
+    def _set_fmu_state(self, state):
+        super()._set_fmu_state(state)
+        self._update_params()  # the derived constants follow the restored parameters
+
+    def _outputs(self, x1, x2):
+        mr = model.manipulator_payload(self.time, self.mr0, self.mr1)
+        self.y = x1
+        self.dy = x2
+        self.d = model.manipulator_friction(x2, model.manipulator_inertia(mr, self.lr),
+                                            self.cr, self.vr)
+        self.mr = mr
+
+    def compute_outputs(self):
+        self._outputs(self.x1, self.x2)
+        self.outputs_stale = False
+
+    def get_real(self, vrs):
+        if not self.initialized:
+            # Initialization mode (y, dy, d, mr are InitialUnknowns): the outputs follow
+            # the start values set so far (see the module docstring).
+            try:
+                self._outputs(self.x1_start, self.x2_start)
+            except ZeroDivisionError:  # J = 0: invalid parameters, reported at the end of init
+                pass
+        return Fmi2Slave.get_real(self, vrs)
+
+    def step(self, current_time, step_size):
+        if step_size < 0.0:
+            self.fail(f"doStep with negative communication step {step_size!r}")
+        try:
+            x1, x2 = plant_integration.rk4_advance(
+                model.manipulator_derivative, current_time, self.x1, self.x2, self.u,
+                step_size, self.max_internal_step, self._params)
+        except (ArithmeticError, ValueError) as error:  # overflow, math domain error
+            x1 = x2 = math.nan
+            reason = f" ({error})"
+        else:
+            reason = ""
+        if x1 - x1 != 0.0 or x2 - x2 != 0.0:  # NaN or inf
+            self.fail(f"state diverged in doStep(t={current_time!r}, h={step_size!r}) "
+                      f"from x1={self.x1!r}, x2={self.x2!r} with u={self.u!r}{reason}; "
+                      "the closed loop is unstable at this step size")
+        self.x1 = x1
+        self.x2 = x2
+        return True

@@ -1,0 +1,69 @@
+"""TrackingReference: the reference ym(t) = amplitude sin(omega t) and the
+tracking errors e = ym - y, de = dym - dy as a co-simulation FMU.
+
+SPEC.md sections 1, 6 and 9 (pendulum: amplitude pi/6, manipulator: 1;
+omega = 1 rad/s in both).
+
+Co-simulation semantics:
+* ym, dym, ddym are functions of the current communication time only (no
+  input dependency); e and de depend directly on the inputs y and dy at the
+  same communication point (direct feedthrough): reading e after setting y
+  gives e for that y, without a doStep.
+* The outputs are available in initialization mode too (at the start
+  time), so a master can propagate e(0), de(0) to the controller before it
+  latches them at the end of initialisation.
+* doStep only advances the time; the FMU has no other state.
+"""
+import math
+
+# pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
+# so the project's base class is imported under that name.
+from afc_slave_base import INPUT, OUTPUT, Variable, finite, positive
+from afc_slave_base import TableSlave as Fmi2Slave
+
+_sin = math.sin
+_cos = math.cos
+
+VARIABLES = (
+    finite("amplitude", math.pi / 6, "rad", "reference amplitude A of ym = A sin(omega t) "
+                                            "(pendulum pi/6, manipulator 1)"),
+    positive("omega", 1.0, "rad/s", "reference angular frequency omega"),
+    Variable("y", INPUT, 0.0, "rad", "plant output y"),
+    Variable("dy", INPUT, 0.0, "rad/s", "plant output rate dy"),
+    Variable("ym", OUTPUT, 0.0, "rad", "reference ym = A sin(omega t)"),
+    Variable("dym", OUTPUT, 0.0, "rad/s", "reference rate dym = A omega cos(omega t)"),
+    Variable("ddym", OUTPUT, 0.0, "rad/s2", "reference acceleration ddym = -A omega^2 sin(omega t)"),
+    Variable("e", OUTPUT, 0.0, "rad", "tracking error e = ym - y", depends_on=("y",)),
+    Variable("de", OUTPUT, 0.0, "rad/s", "tracking error rate de = dym - dy", depends_on=("dy",)),
+)
+
+
+class TrackingReference(Fmi2Slave):
+    VARIABLES = VARIABLES
+    MODEL_DESCRIPTION = ("Sinusoidal reference ym = A sin(omega t) with its derivatives and the "
+                         "tracking errors e = ym - y, de = dym - dy")
+
+    def compute_outputs(self):
+        amplitude, omega = self.amplitude, self.omega
+        phase = omega * self.time
+        s = _sin(phase)
+        ym = amplitude * s
+        dym = amplitude * omega * _cos(phase)
+        self.ym = ym
+        self.dym = dym
+        self.ddym = -amplitude * omega * omega * s
+        self.e = ym - self.y
+        self.de = dym - self.dy
+        self.outputs_stale = False
+
+    def get_real(self, vrs):
+        if not self.initialized:
+            # Initialization mode (every output is an InitialUnknown): outputs at the
+            # start time from the parameters and inputs set so far.
+            self.compute_outputs()
+        return Fmi2Slave.get_real(self, vrs)
+
+    def step(self, current_time, step_size):
+        if step_size < 0.0:
+            self.fail(f"doStep with negative communication step {step_size!r}")
+        return True
