@@ -50,7 +50,7 @@ class InvertedPendulum(Fmi2Slave):
         super().__init__(**kwargs)
         self.x1 = self.x1_start
         self.x2 = self.x2_start
-        self._params = model.pendulum_params(self.gv, self.mc, self.mp, self.lp, self.dist_gain)
+        self._update_params()
 
     def initialize(self, start_time):
         self.x1 = float(self.x1_start)
@@ -58,7 +58,10 @@ class InvertedPendulum(Fmi2Slave):
         self._update_params()
 
     def _update_params(self):
-        self._params = model.pendulum_params(self.gv, self.mc, self.mp, self.lp, self.dist_gain)
+        try:
+            self._params = model.pendulum_params(self.gv, self.mc, self.mp, self.lp, self.dist_gain)
+        except ZeroDivisionError:  # mc + mp = 0: invalid, rejected when initialisation ends
+            self._params = None
 
     def _set_fmu_state(self, state):
         super()._set_fmu_state(state)
@@ -75,9 +78,13 @@ class InvertedPendulum(Fmi2Slave):
             # Initialization mode (y, dy, d are InitialUnknowns): the outputs follow the
             # start values set so far, so that a master propagating initial values hands
             # the reference and the controller the true e(0), de(0).
-            self.y = self.x1_start
-            self.dy = self.x2_start
-            self.d = model.pendulum_disturbance(self.time, self.dist_gain)
+            try:
+                self.y = self.x1_start
+                self.dy = self.x2_start
+                self.d = model.pendulum_disturbance(self.time, self.dist_gain)
+            except BaseException as error:
+                self._crashed("get_real", error)
+                raise
         return Fmi2Slave.get_real(self, vrs)
 
     def step(self, current_time, step_size):

@@ -93,6 +93,9 @@ class Manipulator(Fmi2Slave):
                 self._outputs(self.x1_start, self.x2_start)
             except ZeroDivisionError:  # J = 0: invalid parameters, reported at the end of init
                 pass
+            except BaseException as error:
+                self._crashed("get_real", error)
+                raise
         return Fmi2Slave.get_real(self, vrs)
 
     def step(self, current_time, step_size):

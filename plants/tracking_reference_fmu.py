@@ -60,7 +60,11 @@ class TrackingReference(Fmi2Slave):
         if not self.initialized:
             # Initialization mode (every output is an InitialUnknown): outputs at the
             # start time from the parameters and inputs set so far.
-            self.compute_outputs()
+            try:
+                self.compute_outputs()
+            except BaseException as error:
+                self._crashed("get_real", error)
+                raise
         return Fmi2Slave.get_real(self, vrs)
 
     def step(self, current_time, step_size):
