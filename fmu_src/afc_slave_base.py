@@ -306,6 +306,20 @@ class TableSlave(Fmi2Slave):
             raise
         self.outputs_stale = True
 
+    def _initial_outputs(self):
+        """Outputs in initialization mode (they are InitialUnknowns).
+
+        They follow the parameters and inputs set so far, so that a master
+        propagating initial values through the connections hands every FMU
+        consistent values at the start time (the controller latches e(0),
+        de(0) from them).  While a parameter is invalid the outputs keep their
+        start values; exitInitializationMode then reports the parameter.
+        """
+        if any(v.check(getattr(self, v.name)) for v in self.VARIABLES if v.causality == PARAMETER):
+            return
+        self.initialize(self.start_time)
+        self.compute_outputs()
+
     def _reject(self, vr, value):
         variable = self.VARIABLES[vr]
         if variable.causality == OUTPUT:
@@ -316,8 +330,11 @@ class TableSlave(Fmi2Slave):
 
     def get_real(self, vrs):
         try:
-            if self.outputs_stale and self.initialized:
-                self.compute_outputs()
+            if self.outputs_stale:
+                if self.initialized:
+                    self.compute_outputs()
+                else:
+                    self._initial_outputs()
             attributes = self.__dict__
             names = self._names_by_vr
             return [attributes[names[vr]] for vr in vrs]

@@ -1,0 +1,90 @@
+"""Command line: ``python -m harness run SCENARIO --controller vud`` (also ``afc-harness``)."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from . import scenario as scenarios
+from .master import ALGORITHMS, SimulationFailed, simulate
+from .scores import SCORE_KEYS, score_run
+
+
+def _progress_bar(total: int, description: str, enabled: bool):
+    if not enabled:
+        return None, lambda: None
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=description, unit="step", unit_scale=True, leave=False, file=sys.stderr)
+
+    def update(done, _total):
+        bar.update(done - bar.n)
+
+    return update, bar.close
+
+
+def run_command(args) -> int:
+    scenario = scenarios.load(args.scenario).with_controller(args.controller)
+    if args.step is not None:
+        scenario = scenario.with_parameter("step", args.step)
+    if args.stop is not None:
+        scenario = scenario.with_parameter("stop", args.stop)
+    progress, close = _progress_bar(scenario.steps, f"{scenario.name}/{args.controller}",
+                                    enabled=not args.json and sys.stderr.isatty())
+    try:
+        result = simulate(scenario, algorithm=args.algorithm, progress=progress)
+    except SimulationFailed as failure:
+        close()
+        if args.out:
+            failure.result.write_csv(args.out, args.output_interval)
+            print(f"partial result ({failure.result.rows} rows) written to {args.out}", file=sys.stderr)
+        print(f"error: {failure}", file=sys.stderr)
+        return 2
+    close()
+    if args.out:
+        result.write_csv(args.out, args.output_interval)
+    scores = score_run(result)
+    summary = {"scenario": scenario.name, "controller": args.controller, "step": scenario.step,
+               **scores, "wall_s": result.wall_s, "us_per_step": result.us_per_step}
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"{scenario.name} / {args.controller} ({args.algorithm}), step {scenario.step:g} s, "
+              f"{result.rows - 1} steps in {result.wall_s:.2f} s ({result.us_per_step:.1f} us/step)")
+        for key in SCORE_KEYS:
+            print(f"  {key:8s} {scores[key]:.6g}")
+        if args.out:
+            print(f"  result   {args.out}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m harness",
+                                     description="Co-simulation of the adaptive fuzzy controller FMUs")
+    commands = parser.add_subparsers(dest="command", required=True)
+    run = commands.add_parser("run", help="run one scenario with one controller and score it")
+    run.add_argument("scenario", help=f"scenario name ({', '.join(scenarios.scenario_names())}) or .toml path")
+    run.add_argument("--controller", choices=tuple(scenarios.CONTROLLER_VARIANTS), default="vud")
+    run.add_argument("--step", type=float, help="communication step in s (default: the scenario's)")
+    run.add_argument("--stop", type=float, help="stop time in s (default: the scenario's)")
+    run.add_argument("--algorithm", choices=ALGORITHMS, default="feedthrough",
+                     help="feedthrough: no delay along direct-feedthrough chains (default); "
+                          "jacobi: every connection delayed one step")
+    run.add_argument("--out", help="write the result CSV here")
+    run.add_argument("--output-interval", type=float, help="thin the CSV to this interval (scores use every step)")
+    run.add_argument("--json", action="store_true", help="print one JSON object with the scores")
+    run.set_defaults(handler=run_command)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.handler(args)
+    except scenarios.ScenarioError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    except FileNotFoundError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2

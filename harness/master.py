@@ -1,0 +1,368 @@
+"""A co-simulation master on fmpy's FMU2Slave, generic over FMI 2.0 co-simulation FMUs.
+
+At every communication point the master propagates values along the
+connections in dependency order before anyone steps: a component's outputs
+are read after the inputs they depend on directly were set (dependencies
+from each modelDescription's ModelStructure; no dependency list means
+"depends on every input").  A pure chain plant -> reference -> controller
+-> plant therefore has no artificial one-step delay.  A cycle through
+direct feedthrough is an algebraic loop and a clear error.
+
+``algorithm="jacobi"`` is the classic scheme of most co-simulation engines
+(fmpy's SSP simulator among them): read every output, then set every
+input, so every connection is delayed by one communication step.
+
+The per-step path uses value-reference and value arrays prepared once, one
+getReal and one setReal per FMU per step, and records into a preallocated
+numpy array; nothing is looked up by name, allocated or logged per step.
+"""
+from __future__ import annotations
+
+import time as clock
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .fmi import Component, FmiError, ModelInfo
+from .scenario import Scenario, ScenarioError
+
+ALGORITHMS = ("feedthrough", "jacobi")
+FMI_WARNING = 1
+DIVERGENCE_CHECK_EVERY = 64  # rows; a non-finite value set on an FMU is caught at once
+
+
+class Divergence(RuntimeError):
+    """The closed loop left the bound or produced a non-finite value."""
+
+
+class SimulationFailed(RuntimeError):
+    """A run stopped early; ``result`` holds every row computed until then."""
+
+    def __init__(self, message: str, result: "RunResult", cause: Exception):
+        super().__init__(message)
+        self.result = result
+        self.cause = cause
+
+
+@dataclass
+class RunResult:
+    scenario: Scenario
+    algorithm: str
+    time: np.ndarray
+    columns: list  # "instance.variable", in the scenario's record order
+    values: np.ndarray  # rows x columns
+    wall_s: float
+    complete: bool
+
+    @property
+    def rows(self) -> int:
+        return len(self.time)
+
+    def signal(self, name: str) -> np.ndarray:
+        try:
+            return self.values[:, self.columns.index(name)]
+        except ValueError:
+            raise KeyError(f"{name!r} was not recorded; recorded: {', '.join(self.columns)}") from None
+
+    def role(self, role: str) -> np.ndarray:
+        """The signal that plays ``role`` (e, de, ym, dym, u) in the scores."""
+        return self.signal(self.scenario.signals[role])
+
+    @property
+    def us_per_step(self) -> float:
+        return 1e6 * self.wall_s / max(self.rows - 1, 1)
+
+    def write_csv(self, path, output_interval: float | None = None) -> Path:
+        """FMI cross-check style: time first, quoted ``instance.variable`` header."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        every = 1
+        if output_interval:
+            every = max(1, round(output_interval / self.scenario.step))
+        table = np.column_stack([self.time, self.values])[::every]
+        header = ",".join(f'"{name}"' for name in ["time", *self.columns])
+        np.savetxt(path, table, delimiter=",", header=header, comments="", fmt="%.17g")
+        return path
+
+
+def resolve_fmu(spec_fmu: str, scenario: Scenario, built: dict | None) -> Path:
+    if spec_fmu.endswith(".fmu"):
+        path = Path(spec_fmu)
+        if not path.is_absolute() and scenario.path is not None:
+            path = scenario.path.parent / path
+        if not path.exists():
+            raise ScenarioError(f"FMU file not found: {path}")
+        return path
+    if built is None:
+        import build_fmu
+
+        built = build_fmu.ensure_built()
+    if spec_fmu not in built:
+        raise ScenarioError(f"unknown FMU {spec_fmu!r}; valid: {', '.join(sorted(built))} or a path to an .fmu file")
+    return built[spec_fmu]
+
+
+def _names(info: ModelInfo, causality: str) -> str:
+    return ", ".join(v.name for v in info.variables.values() if v.causality == causality)
+
+
+def _check_variable(dotted: str, infos: dict, causality: str, role: str):
+    instance, _, variable = dotted.partition(".")
+    if instance not in infos:
+        raise ScenarioError(f"{role} {dotted!r}: unknown instance {instance!r}; valid: {', '.join(infos)}")
+    info = infos[instance]
+    found = info.variables.get(variable)
+    if found is None:
+        raise ScenarioError(f"{role} {dotted!r}: {instance} has no variable {variable!r}; "
+                            f"valid {causality}s: {_names(info, causality)}")
+    if found.causality != causality:
+        raise ScenarioError(f"{role} {dotted!r} is a {found.causality}, not an {causality}; "
+                            f"valid {causality}s of {instance}: {_names(info, causality)}")
+    if found.type != "Real":
+        raise ScenarioError(f"{role} {dotted!r} is of type {found.type}; connections and records are Real")
+
+
+def validate(scenario: Scenario, infos: dict):
+    """Check every name of the scenario against the model descriptions."""
+    for name, spec in scenario.components.items():
+        info = infos[name]
+        for parameter in spec.parameters:
+            found = info.variables.get(parameter)
+            if found is None or found.causality != "parameter":
+                raise ScenarioError(f"components.{name}: {info.model_identifier} has no parameter {parameter!r}; "
+                                    f"valid: {_names(info, 'parameter')}")
+    targets = set()
+    for connection in scenario.connections:
+        _check_variable(connection.source, infos, "output", "connection from")
+        _check_variable(connection.target, infos, "input", "connection to")
+        if connection.target in targets:
+            raise ScenarioError(f"input {connection.target!r} is connected twice")
+        targets.add(connection.target)
+    for dotted in scenario.record:
+        _check_variable(dotted, infos, "output", "record")
+    for role, dotted in scenario.signals.items():
+        if dotted not in scenario.record:
+            raise ScenarioError(f"signal {role} = {dotted!r} is not in record.variables")
+
+
+@dataclass
+class _Read:
+    component: Component
+    references: object
+    values: object
+    count: int
+    view: np.ndarray  # numpy view of values
+    first_column: int  # recorded outputs come first in the buffer
+    recorded: int
+
+
+@dataclass
+class _Write:
+    component: Component
+    references: object
+    values: object
+    count: int
+    copies: tuple  # (index in values, source values array, index in source)
+
+
+def _order(scenario: Scenario, infos: dict, reads: dict, algorithm: str) -> list:
+    """The sequence of ("get"|"set", instance) actions for one communication point."""
+    getters = [name for name in scenario.components if reads[name]]
+    setters = list(dict.fromkeys(c.target_instance for c in scenario.connections))
+    if algorithm == "jacobi":
+        return [("get", n) for n in getters] + [("set", n) for n in setters]
+    edges = {("get", n): set() for n in getters}
+    edges.update({("set", n): set() for n in setters})
+    for connection in scenario.connections:
+        edges[("set", connection.target_instance)].add(("get", connection.source_instance))
+    for name in setters:
+        if name not in reads or not reads[name]:
+            continue
+        connected_inputs = {c.target_variable for c in scenario.connections if c.target_instance == name}
+        dependencies = infos[name].direct_dependencies
+        if any(set(dependencies.get(output, ())) & connected_inputs for output in reads[name]):
+            edges[("get", name)].add(("set", name))
+    order, done = [], set()
+    pending = list(edges)
+    while pending:
+        ready = [node for node in pending if edges[node] <= done]
+        if not ready:
+            loop = [f"{kind} {name}" for kind, name in pending]
+            raise ScenarioError("algebraic loop: these reads and writes wait on each other through direct "
+                                f"feedthrough: {', '.join(loop)}; break it with a component whose output does "
+                                "not depend directly on its input, or run --algorithm jacobi")
+        for node in ready:
+            order.append(node)
+            done.add(node)
+            pending.remove(node)
+    return order
+
+
+class Master:
+    """Instantiate, initialise and step the FMUs of one scenario."""
+
+    def __init__(self, scenario: Scenario, algorithm: str = "feedthrough", fmu_paths: dict | None = None,
+                 logging_on: bool = True):
+        if algorithm not in ALGORITHMS:
+            raise ScenarioError(f"unknown algorithm {algorithm!r}; valid: {', '.join(ALGORITHMS)}")
+        self.scenario, self.algorithm = scenario, algorithm
+        self.infos = {name: ModelInfo.read(resolve_fmu(spec.fmu, scenario, fmu_paths))
+                      for name, spec in scenario.components.items()}
+        validate(scenario, self.infos)
+        self.logging_on = logging_on
+        self.components: dict[str, Component] = {}
+
+    def _prepare_plan(self):
+        scenario = self.scenario
+        reads = {}
+        for name in scenario.components:
+            recorded = [d.split(".", 1)[1] for d in scenario.record if d.split(".", 1)[0] == name]
+            connected = [c.source_variable for c in scenario.connections if c.source_instance == name]
+            reads[name] = list(dict.fromkeys(recorded + connected))
+        self.order = _order(scenario, self.infos, reads, self.algorithm)
+        read_buffers, columns = {}, []
+        for kind, name in self.order:
+            if kind != "get":
+                continue
+            component = self.components[name]
+            references, values, count = component.real_buffer(reads[name])
+            recorded = [v for v in reads[name] if f"{name}.{v}" in scenario.record]
+            read_buffers[name] = _Read(component, references, values, count,
+                                       np.ctypeslib.as_array(values), len(columns), len(recorded))
+            columns += [f"{name}.{v}" for v in recorded]
+        self.plan = []
+        for kind, name in self.order:
+            if kind == "get":
+                self.plan.append(read_buffers[name])
+                continue
+            component = self.components[name]
+            incoming = [c for c in scenario.connections if c.target_instance == name]
+            references, values, count = component.real_buffer([c.target_variable for c in incoming])
+            copies = tuple((k, read_buffers[c.source_instance].values,
+                            reads[c.source_instance].index(c.source_variable)) for k, c in enumerate(incoming))
+            self.plan.append(_Write(component, references, values, count, copies))
+        self.plan_columns = columns
+        # CSV columns in the scenario's record order
+        self.column_order = [columns.index(d) for d in scenario.record]
+
+    def _propagate(self, time: float):
+        """One pass of reads and writes at a communication point (the per-step path)."""
+        for action in self.plan:
+            if action.__class__ is _Read:
+                status = action.component.get_reals(action.references, action.values, action.count)
+                if status > FMI_WARNING:
+                    action.component.fail("fmi2GetReal", status, time)
+            else:
+                values = action.values
+                for k, source, j in action.copies:
+                    values[k] = source[j]
+                status = action.component.set_reals(action.references, values, action.count)
+                if status > FMI_WARNING:
+                    self._write_failed(action, status, time)
+
+    def _write_failed(self, action: _Write, status: int, time: float):
+        values = list(action.values)
+        if not all(np.isfinite(values)):
+            raise Divergence(self._divergence_text(time, f"{action.component.name} was handed "
+                                                   f"a non-finite input ({values})"))
+        action.component.fail("fmi2SetReal", status, time)
+
+    def _divergence_text(self, time: float, what: str) -> str:
+        return (f"diverged at t = {time:.6g} with step {self.scenario.step:g}: {what}; "
+                "try a smaller step")
+
+    def run(self, progress=None, progress_every: int = 0) -> RunResult:
+        """Run the scenario; on failure raise SimulationFailed holding the partial result."""
+        scenario = self.scenario
+        steps, step, start = scenario.steps, scenario.step, scenario.start
+        stop = start + steps * step
+        wall_start = clock.perf_counter()
+        record = None
+        rows_done = 0
+        try:
+            for name, spec in scenario.components.items():
+                component = Component(name, self.infos[name]).instantiate(logging_on=self.logging_on)
+                self.components[name] = component
+            for name, spec in scenario.components.items():
+                component = self.components[name]
+                component.setup(start, stop)
+                component.set_parameters(spec.parameters)
+            self._prepare_plan()
+            record = np.empty((steps + 1, len(self.plan_columns)))
+            # initial values propagated through the connections, in dependency order
+            saved_plan = self.plan
+            if self.algorithm == "jacobi":  # consistent initial values for both schemes
+                self.algorithm = "feedthrough"
+                self._prepare_plan()
+                self._propagate(start)
+                self.plan = saved_plan
+                self.algorithm = "jacobi"
+                self._prepare_plan()
+            else:
+                self._propagate(start)
+            for component in self.components.values():
+                component.exit_initialization()
+            reads = [a for a in self.plan if a.__class__ is _Read and a.recorded]
+            components = list(self.components.values())
+            bound = scenario.divergence_bound
+            every = progress_every or max(1, steps // 200)
+            for n in range(steps):
+                t = start + n * step
+                self._propagate(t)
+                row = record[n]
+                for read in reads:
+                    row[read.first_column:read.first_column + read.recorded] = read.view[:read.recorded]
+                rows_done = n + 1
+                if rows_done % DIVERGENCE_CHECK_EVERY == 0:
+                    self._check_bound(record, rows_done - DIVERGENCE_CHECK_EVERY, rows_done, bound)
+                for component in components:
+                    status = component.do_step(t, step)
+                    if status > FMI_WARNING:
+                        component.fail("fmi2DoStep", status, t)
+                if progress is not None and rows_done % every == 0:
+                    progress(rows_done, steps)
+            self._propagate(stop)
+            row = record[steps]
+            for read in reads:
+                row[read.first_column:read.first_column + read.recorded] = read.view[:read.recorded]
+            rows_done = steps + 1
+            self._check_bound(record, max(0, rows_done - DIVERGENCE_CHECK_EVERY - 1), rows_done, bound)
+            if progress is not None:
+                progress(steps, steps)
+        except (FmiError, Divergence, ScenarioError) as error:
+            result = self._result(record, rows_done, clock.perf_counter() - wall_start, complete=False)
+            if isinstance(error, ScenarioError) and record is None:
+                raise
+            raise SimulationFailed(str(error), result, error) from error
+        finally:
+            for component in self.components.values():
+                component.free()
+            self.components = {}
+        return self._result(record, rows_done, clock.perf_counter() - wall_start, complete=True)
+
+    def _check_bound(self, record, first: int, last: int, bound: float):
+        block = record[first:last]
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.abs(block) < bound)
+        if bad.any():
+            row, column = np.argwhere(bad)[0]
+            time = self.scenario.start + (first + row) * self.scenario.step
+            name = self.plan_columns[column]
+            raise Divergence(self._divergence_text(time, f"{name} = {block[row, column]:.6g} "
+                                                   f"(bound {bound:g})"))
+
+    def _result(self, record, rows: int, wall_s: float, complete: bool) -> RunResult:
+        scenario = self.scenario
+        if record is None:
+            values = np.empty((0, len(scenario.record)))
+        else:
+            values = record[:rows][:, self.column_order]
+        time = scenario.start + np.arange(rows) * scenario.step
+        return RunResult(scenario, self.algorithm, time, list(scenario.record), values, wall_s, complete)
+
+
+def simulate(scenario: Scenario, algorithm: str = "feedthrough", fmu_paths: dict | None = None,
+             progress=None) -> RunResult:
+    """Run one scenario (with its controller variant already set)."""
+    return Master(scenario, algorithm, fmu_paths).run(progress=progress)

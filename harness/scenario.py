@@ -1,0 +1,161 @@
+"""Scenario files: one TOML file per closed loop, in harness/scenarios/.
+
+A scenario names its FMU instances, their parameters, the connections
+(``instance.variable`` to ``instance.variable``), the experiment (start,
+stop, communication step) and the signals to record.  See
+``scenarios/pendulum_case1.toml`` for the format.  The controller variant
+(``vud``, ``fixed``, ``fae``) is chosen at run time and set on the
+instance named by ``controller_instance``.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+CONTROLLER_VARIANTS = {"vud": 1, "fixed": 2, "fae": 3}
+SIGNAL_ROLES = ("e", "de", "ym", "dym", "u")
+
+
+class ScenarioError(ValueError):
+    """A mistake in a scenario file; the message lists the valid names."""
+
+
+@dataclass
+class Connection:
+    source: str  # "instance.variable"
+    target: str
+
+    @property
+    def source_instance(self):
+        return self.source.split(".", 1)[0]
+
+    @property
+    def source_variable(self):
+        return self.source.split(".", 1)[1]
+
+    @property
+    def target_instance(self):
+        return self.target.split(".", 1)[0]
+
+    @property
+    def target_variable(self):
+        return self.target.split(".", 1)[1]
+
+
+@dataclass
+class ComponentSpec:
+    name: str
+    fmu: str  # a model identifier built by build_fmu.py, or a path to an .fmu file
+    parameters: dict = field(default_factory=dict)
+
+
+@dataclass
+class Scenario:
+    name: str
+    description: str
+    start: float
+    stop: float
+    step: float
+    components: dict  # name -> ComponentSpec
+    connections: list
+    record: list
+    signals: dict  # role -> "instance.variable"
+    controller_instance: str = "controller"
+    divergence_bound: float = 1e8
+    path: Path | None = None
+
+    def with_controller(self, controller: str) -> "Scenario":
+        """A copy with the controller variant set (vud, fixed or fae)."""
+        if controller not in CONTROLLER_VARIANTS:
+            raise ScenarioError(f"unknown controller {controller!r}; valid: {', '.join(CONTROLLER_VARIANTS)}")
+        if self.controller_instance not in self.components:
+            raise ScenarioError(f"controller_instance {self.controller_instance!r} is not a component; "
+                                f"valid: {', '.join(self.components)}")
+        result = copy.deepcopy(self)
+        result.components[self.controller_instance].parameters["variant"] = CONTROLLER_VARIANTS[controller]
+        return result
+
+    def with_parameter(self, dotted: str, value) -> "Scenario":
+        """A copy with ``instance.parameter`` (or ``step``/``stop``) set."""
+        result = copy.deepcopy(self)
+        if dotted in ("step", "stop", "start"):
+            setattr(result, dotted, float(value))
+            return result
+        instance, _, name = dotted.partition(".")
+        if instance not in result.components or not name:
+            raise ScenarioError(f"unknown parameter {dotted!r}; write instance.parameter with instance one of "
+                                f"{', '.join(result.components)} (or step, stop)")
+        result.components[instance].parameters[name] = value
+        return result
+
+    @property
+    def steps(self) -> int:
+        count = round((self.stop - self.start) / self.step)
+        if count < 1:
+            raise ScenarioError(f"stop - start = {self.stop - self.start} is shorter than one step {self.step}")
+        return count
+
+
+def scenario_names() -> list[str]:
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+
+
+def load(name_or_path) -> Scenario:
+    """Load a scenario by name (harness/scenarios/NAME.toml) or by file path."""
+    path = Path(name_or_path)
+    if path.suffix != ".toml":
+        path = SCENARIO_DIR / f"{name_or_path}.toml"
+    if not path.exists():
+        raise ScenarioError(f"unknown scenario {str(name_or_path)!r}; valid: {', '.join(scenario_names())}")
+    with open(path, "rb") as stream:
+        data = tomllib.load(stream)
+    return parse(data, path)
+
+
+def _require(table: dict, key: str, where: str):
+    if key not in table:
+        raise ScenarioError(f"{where}: missing key {key!r}")
+    return table[key]
+
+
+def parse(data: dict, path: Path | None = None) -> Scenario:
+    where = str(path or "scenario")
+    experiment = _require(data, "experiment", where)
+    components = {}
+    for name, table in _require(data, "components", where).items():
+        if "." in name:
+            raise ScenarioError(f"{where}: instance name {name!r} must not contain '.'")
+        components[name] = ComponentSpec(name, str(_require(table, "fmu", f"{where}: components.{name}")),
+                                         dict(table.get("parameters", {})))
+    connections = []
+    for index, table in enumerate(data.get("connections", [])):
+        connection = Connection(str(_require(table, "from", f"{where}: connection {index + 1}")),
+                                str(_require(table, "to", f"{where}: connection {index + 1}")))
+        connections.append(connection)
+    record = list(data.get("record", {}).get("variables", []))
+    signals = dict(data.get("signals", {}))
+    scenario = Scenario(
+        name=str(data.get("name", path.stem if path else "scenario")),
+        description=str(data.get("description", "")),
+        start=float(experiment.get("start", 0.0)),
+        stop=float(_require(experiment, "stop", f"{where}: experiment")),
+        step=float(_require(experiment, "step", f"{where}: experiment")),
+        components=components, connections=connections, record=record, signals=signals,
+        controller_instance=str(data.get("controller_instance", "controller")),
+        divergence_bound=float(experiment.get("divergence_bound", 1e8)),
+        path=path,
+    )
+    for role in signals:
+        if role not in SIGNAL_ROLES:
+            raise ScenarioError(f"{where}: unknown signal role {role!r}; valid: {', '.join(SIGNAL_ROLES)}")
+    if not scenario.step > 0 or not scenario.stop > scenario.start:
+        raise ScenarioError(f"{where}: need step > 0 and stop > start (step = {scenario.step}, "
+                            f"start = {scenario.start}, stop = {scenario.stop})")
+    return scenario
