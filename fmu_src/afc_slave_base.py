@@ -237,9 +237,7 @@ class TableSlave(Fmi2Slave):
 
     @_fmi_entry
     def exit_initialization_mode(self):
-        errors = [message for message in
-                  (v.check(getattr(self, v.name)) for v in self.VARIABLES if v.causality == PARAMETER)
-                  if message]
+        errors = self._parameter_errors()
         if errors:
             self.fail("; ".join(errors))
         self.time = self.start_time
@@ -269,6 +267,8 @@ class TableSlave(Fmi2Slave):
 
     def do_step(self, current_time, step_size):
         try:
+            if not step_size >= 0.0:
+                self.fail(f"doStep with communication step {step_size!r}; it must be >= 0")
             if self.outputs_stale:
                 self.compute_outputs()
             ok = self.step(current_time, step_size)
@@ -279,7 +279,15 @@ class TableSlave(Fmi2Slave):
         self.outputs_stale = True
         return ok is not False
 
+    def _parameter_errors(self) -> list:
+        table = [v.check(getattr(self, v.name)) for v in self.VARIABLES if v.causality == PARAMETER]
+        return [message for message in table if message] or self.cross_parameter_errors()
+
     # ------------------------------------------------------- model hooks
+    def cross_parameter_errors(self) -> list:
+        """Messages for invalid combinations of individually valid parameters."""
+        return []
+
     def initialize(self, start_time: float) -> None:
         """Set the internal state once the parameters and start inputs are known."""
 
@@ -315,7 +323,7 @@ class TableSlave(Fmi2Slave):
         de(0) from them).  While a parameter is invalid the outputs keep their
         start values; exitInitializationMode then reports the parameter.
         """
-        if any(v.check(getattr(self, v.name)) for v in self.VARIABLES if v.causality == PARAMETER):
+        if self._parameter_errors():
             return
         self.initialize(self.start_time)
         self.compute_outputs()

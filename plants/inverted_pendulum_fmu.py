@@ -73,23 +73,7 @@ class InvertedPendulum(Fmi2Slave):
         self.d = model.pendulum_disturbance(self.time, self.dist_gain)
         self.outputs_stale = False
 
-    def get_real(self, vrs):
-        if not self.initialized:
-            # Initialization mode (y, dy, d are InitialUnknowns): the outputs follow the
-            # start values set so far, so that a master propagating initial values hands
-            # the reference and the controller the true e(0), de(0).
-            try:
-                self.y = self.x1_start
-                self.dy = self.x2_start
-                self.d = model.pendulum_disturbance(self.time, self.dist_gain)
-            except BaseException as error:
-                self._crashed("get_real", error)
-                raise
-        return Fmi2Slave.get_real(self, vrs)
-
     def step(self, current_time, step_size):
-        if step_size < 0.0:
-            self.fail(f"doStep with negative communication step {step_size!r}")
         try:
             x1, x2 = plant_integration.rk4_advance(
                 model.pendulum_derivative, current_time, self.x1, self.x2, self.u,

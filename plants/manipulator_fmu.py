@@ -61,10 +61,13 @@ class Manipulator(Fmi2Slave):
         self._params = model.manipulator_params(self.gv, self.lr, self.dr, self.cr, self.vr,
                                                 self.mr0, self.mr1)
 
-    def initialize(self, start_time):
+    def cross_parameter_errors(self):
         if not self.mr1 < self.mr0:
-            self.fail(f"parameter mr1 = {self.mr1!r} is invalid; valid range: 0 <= mr1 < mr0 "
-                      f"= {self.mr0!r} (the payload mr(t) = mr0 + mr1 sin t must stay > 0)")
+            return [f"parameter mr1 = {self.mr1!r} is invalid; valid range: 0 <= mr1 < mr0 "
+                    f"= {self.mr0!r} (the payload mr(t) = mr0 + mr1 sin t must stay > 0)"]
+        return []
+
+    def initialize(self, start_time):
         self.x1 = float(self.x1_start)
         self.x2 = float(self.x2_start)
         self._update_params()
@@ -85,22 +88,7 @@ class Manipulator(Fmi2Slave):
         self._outputs(self.x1, self.x2)
         self.outputs_stale = False
 
-    def get_real(self, vrs):
-        if not self.initialized:
-            # Initialization mode (y, dy, d, mr are InitialUnknowns): the outputs follow
-            # the start values set so far (see the module docstring).
-            try:
-                self._outputs(self.x1_start, self.x2_start)
-            except ZeroDivisionError:  # J = 0: invalid parameters, reported at the end of init
-                pass
-            except BaseException as error:
-                self._crashed("get_real", error)
-                raise
-        return Fmi2Slave.get_real(self, vrs)
-
     def step(self, current_time, step_size):
-        if step_size < 0.0:
-            self.fail(f"doStep with negative communication step {step_size!r}")
         try:
             x1, x2 = plant_integration.rk4_advance(
                 model.manipulator_derivative, current_time, self.x1, self.x2, self.u,

@@ -1,0 +1,113 @@
+"""An independent in-process oracle: the same closed loop without FMI.
+
+plant -> reference -> controller -> plant on the same communication grid
+with the same held-input scheme as the master: at each communication point
+t_n the outputs are evaluated (feedthrough: in dependency order; jacobi:
+from the inputs set at the previous point), then the controller integrates
+theta with ``theta += h * dtheta(t_n)`` and the plant integrates with
+fixed-step RK4 while u is held.  It calls the same pure functions the FMUs
+run (``fmu_src.afc_math``, ``plants.*_model``, ``plants.plant_integration``),
+so co-simulation and oracle must agree to rounding.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fmu_src import afc_math
+from plants import inverted_pendulum_model, manipulator_model, plant_integration
+
+from .scenario import Scenario
+
+
+def _parameters(scenario: Scenario, instance: str) -> dict:
+    import build_fmu
+
+    spec = scenario.components[instance]
+    defaults = {v.name: v.start for v in build_fmu.model_class(spec.fmu).VARIABLES if v.causality == "parameter"}
+    return {**defaults, **spec.parameters}
+
+
+def _plant(scenario: Scenario):
+    """(derivative, params, extra outputs function, plant parameters) of the scenario's plant."""
+    spec = scenario.components["plant"]
+    p = _parameters(scenario, "plant")
+    if spec.fmu == "InvertedPendulum":
+        params = inverted_pendulum_model.pendulum_params(p["gv"], p["mc"], p["mp"], p["lp"], p["dist_gain"])
+
+        def extra(t, x1, x2):
+            return {"plant.d": inverted_pendulum_model.pendulum_disturbance(t, p["dist_gain"])}
+
+        return inverted_pendulum_model.pendulum_derivative, params, extra, p
+    if spec.fmu == "Manipulator":
+        params = manipulator_model.manipulator_params(p["gv"], p["lr"], p["dr"], p["cr"], p["vr"],
+                                                      p["mr0"], p["mr1"])
+
+        def extra(t, x1, x2):
+            mr = manipulator_model.manipulator_payload(t, p["mr0"], p["mr1"])
+            inertia = manipulator_model.manipulator_inertia(mr, p["lr"])
+            return {"plant.d": manipulator_model.manipulator_friction(x2, inertia, p["cr"], p["vr"]),
+                    "plant.mr": mr}
+
+        return manipulator_model.manipulator_derivative, params, extra, p
+    raise ValueError(f"the oracle knows InvertedPendulum and Manipulator, not {spec.fmu!r}")
+
+
+def simulate_oracle(scenario: Scenario, algorithm: str = "feedthrough") -> dict:
+    """{"time": t, "instance.variable": array, ...} of the closed loop (no FMI)."""
+    derivative, plant_params, plant_extra, plant = _plant(scenario)
+    reference = _parameters(scenario, "reference")
+    controller = _parameters(scenario, "controller")
+    amplitude, omega = reference["amplitude"], reference["omega"]
+    _, p12, p22 = afc_math.lyapunov_p(controller["k1"], controller["k2"], controller["q1"], controller["q2"])
+    variant = controller["variant"]
+    gamma, m_theta, delta, gamma_w = (controller["gamma"], controller["m_theta"], controller["delta"],
+                                      controller["gamma_w"])
+    start, step, steps = scenario.start, scenario.step, scenario.steps
+    max_internal_step = plant["max_internal_step"]
+
+    def reference_outputs(t, y, dy):
+        ym = amplitude * math.sin(omega * t)
+        dym = amplitude * omega * math.cos(omega * t)
+        return ym, dym, ym - y, dym - dy
+
+    x1, x2 = float(plant["x1_start"]), float(plant["x2_start"])
+    theta, w_hat = [float(controller["theta0"])] * 4, 0.0
+    # initial values propagated in dependency order (both algorithms)
+    ym, dym, e, de = reference_outputs(start, x1, x2)
+    p = dict(controller, e0=e, de0=de)
+    held_reference = (x1, x2)
+    held_controller = (e, de, ym, dym)
+    held_u = afc_math.controller_output(e, de, ym, dym, 0.0, theta, w_hat, p)[0]
+
+    names = ["plant.y", "plant.dy", "reference.ym", "reference.dym", "reference.e", "reference.de",
+             "controller.u", "controller.E", "controller.dE", "controller.alpha1", "controller.alpha2",
+             "controller.theta1", "controller.theta2", "controller.theta3", "controller.theta4",
+             "controller.w_hat", *plant_extra(start, x1, x2)]
+    table = np.empty((steps + 1, len(names)))
+    for n in range(steps + 1):
+        t = start + n * step
+        if algorithm == "jacobi":
+            ym, dym, e, de = reference_outputs(t, *held_reference)
+            u, *diagnostics = afc_math.controller_output(*held_controller, t - start, theta, w_hat, p)[:5]
+        else:
+            ym, dym, e, de = reference_outputs(t, x1, x2)
+            u, *diagnostics = afc_math.controller_output(e, de, ym, dym, t - start, theta, w_hat, p)[:5]
+        table[n] = (x1, x2, ym, dym, e, de, u, *diagnostics, *theta, w_hat if variant == 3 else 0.0,
+                    *plant_extra(t, x1, x2).values())
+        if n == steps:
+            break
+        held_reference, held_controller, held_u = (x1, x2), (e, de, ym, dym), u
+        # controller: theta over [t, t + h] from E, dE, xi at t with its inputs as now set
+        _, error, error_rate, _, _, xi = afc_math.controller_output(*held_controller, t - start, theta, w_hat, p)
+        tau = afc_math.adaptation_signal(error, error_rate, p12, p22)
+        theta = [theta[j] + step * afc_math.projected_rate(theta[j], tau, xi[j], gamma, m_theta, delta)
+                 for j in range(4)]
+        if variant == afc_math.VARIANT_FAE:
+            w_hat += step * gamma_w * tau
+        x1, x2 = plant_integration.rk4_advance(derivative, t, x1, x2, held_u, step, max_internal_step,
+                                               plant_params)
+    result = {"time": start + np.arange(steps + 1) * step}
+    result.update({name: table[:, k] for k, name in enumerate(names)})
+    return result
