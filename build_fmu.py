@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import re
+import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,15 +59,29 @@ def is_stale(fmu: FmuSource) -> bool:
     return any(source.stat().st_mtime > built for source in fmu.sources)
 
 
-def build(fmu: FmuSource) -> Path:
-    from pythonfmu.builder import FmuBuilder
+def build_script(script: Path, fmu_path: Path, project_files) -> Path:
+    """Build one FMU with pythonfmu's builder in a fresh interpreter.
 
-    for folder in {str(p.parent) for p in fmu.sources}:
-        if folder not in sys.path:
-            sys.path.insert(0, folder)
-    FMU_DIR.mkdir(parents=True, exist_ok=True)
-    return FmuBuilder.build_FMU(fmu.script, dest=fmu.fmu_path, project_files=fmu.project_files,
-                                canGetAndSetFMUstate=True, canSerializeFMUstate=True)
+    A fresh process because a process that has loaded one of our FMUs may
+    import ``pythonfmu`` from that FMU's resources (which hold no binaries).
+    The folders of the project files go on PYTHONPATH, so the script's own
+    imports resolve while the builder reads its model description.
+    """
+    fmu_path.parent.mkdir(parents=True, exist_ok=True)
+    folders = list(dict.fromkeys(str(Path(p).resolve().parent) for p in (script, *project_files)))
+    environment = dict(os.environ, PYTHONPATH=os.pathsep.join(folders + [os.environ.get("PYTHONPATH", "")]))
+    code = ("import sys; from pythonfmu.builder import FmuBuilder; "
+            "FmuBuilder.build_FMU(sys.argv[1], dest=sys.argv[2], project_files=sys.argv[3:], "
+            "canGetAndSetFMUstate=True, canSerializeFMUstate=True)")
+    completed = subprocess.run([sys.executable, "-c", code, str(script), str(fmu_path),
+                                *map(str, project_files)], env=environment, capture_output=True, text=True)
+    if completed.returncode != 0:
+        raise RuntimeError(f"building {fmu_path.name} from {script} failed:\n{completed.stderr}")
+    return fmu_path
+
+
+def build(fmu: FmuSource) -> Path:
+    return build_script(fmu.script, fmu.fmu_path, fmu.project_files)
 
 
 def ensure_built(force: bool = False, verbose: bool = False) -> dict[str, Path]:

@@ -81,8 +81,9 @@ class Component:
 
     def instantiate(self, logging_on: bool = False):
         self.unzip_dir = extract(str(self.info.path), tempfile.mkdtemp(prefix=f"afc_{self.name}_"))
-        self.slave = FMU2Slave(guid=self.info.guid, unzipDirectory=self.unzip_dir,
-                               modelIdentifier=self.info.model_identifier, instanceName=self.name)
+        self.slave = self._call("loading the FMU's shared library", lambda: FMU2Slave(
+            guid=self.info.guid, unzipDirectory=self.unzip_dir,
+            modelIdentifier=self.info.model_identifier, instanceName=self.name))
         callbacks = fmi2CallbackFunctions()
         callbacks.logger = fmi2CallbackLoggerTYPE(self._log_message)
         callbacks.allocateMemory = _fmpy_default_callbacks.allocateMemory
