@@ -58,10 +58,7 @@ def run_command(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m harness",
-                                     description="Co-simulation of the adaptive fuzzy controller FMUs")
-    commands = parser.add_subparsers(dest="command", required=True)
+def register_run(commands):
     run = commands.add_parser("run", help="run one scenario with one controller and score it")
     run.add_argument("scenario", help=f"scenario name ({', '.join(scenarios.scenario_names())}) or .toml path")
     run.add_argument("--controller", choices=tuple(scenarios.CONTROLLER_VARIANTS), default="vud")
@@ -74,6 +71,21 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--output-interval", type=float, help="thin the CSV to this interval (scores use every step)")
     run.add_argument("--json", action="store_true", help="print one JSON object with the scores")
     run.set_defaults(handler=run_command)
+
+
+def _subcommand_registrations():
+    """Each subcommand lives in its own module with a ``register(commands)`` function."""
+    from . import report_tables, sweep
+
+    return [register_run, report_tables.register, sweep.register]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m harness",
+                                     description="Co-simulation of the adaptive fuzzy controller FMUs")
+    commands = parser.add_subparsers(dest="command", required=True)
+    for register in _subcommand_registrations():
+        register(commands)
     return parser
 
 

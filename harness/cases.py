@@ -1,0 +1,95 @@
+"""Run many co-simulations in parallel processes: one case = scenario x controller x settings."""
+from __future__ import annotations
+
+import multiprocessing
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import scenario as scenarios
+from .master import Divergence, SimulationFailed, simulate
+from .scores import score_run
+
+FIGURE_SIGNALS = ("plant.y", "plant.dy", "reference.ym", "reference.dym", "reference.e", "reference.de",
+                  "controller.u")
+
+
+@dataclass(frozen=True)
+class Case:
+    scenario: str
+    controller: str
+    step: float | None = None  # None: the scenario's step
+    stop: float | None = None  # None: the scenario's stop time
+    algorithm: str = "feedthrough"
+    overrides: tuple = field(default=())  # (("plant.mp", 1.0), ...)
+    figure_interval: float | None = None  # return signals thinned to this interval (figures)
+
+    def build(self) -> scenarios.Scenario:
+        scenario = scenarios.load(self.scenario).with_controller(self.controller)
+        if self.step is not None:
+            scenario = scenario.with_parameter("step", self.step)
+        if self.stop is not None:
+            scenario = scenario.with_parameter("stop", self.stop)
+        for name, value in self.overrides:
+            scenario = scenario.with_parameter(name, value)
+        return scenario
+
+
+def run_case(case: Case, fmu_paths: dict | None = None) -> dict:
+    """Scores of one case; a diverged or failed run is a row with its reason, not an exception."""
+    scenario = case.build()
+    outcome = {"scenario": case.scenario, "controller": case.controller, "step": scenario.step,
+               "algorithm": case.algorithm}
+    try:
+        result = simulate(scenario, algorithm=case.algorithm, fmu_paths=fmu_paths)
+    except SimulationFailed as failure:
+        status = "diverged" if isinstance(failure.cause, Divergence) else "failed"
+        outcome.update(status=status, reason=str(failure).splitlines()[0],
+                       wall_s=failure.result.wall_s, rows=failure.result.rows)
+        return outcome
+    outcome.update(status="ok", reason="", **score_run(result), wall_s=result.wall_s,
+                   us_per_step=result.us_per_step, rows=result.rows)
+    if case.figure_interval:
+        every = max(1, round(case.figure_interval / scenario.step))
+        outcome["signals"] = {"time": result.time[::every],
+                              **{name: result.signal(name)[::every] for name in FIGURE_SIGNALS}}
+    return outcome
+
+
+def default_jobs() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def run_cases(cases: list, jobs: int | None = None, description: str = "co-simulations",
+              progress: bool | None = None) -> list:
+    """Outcomes of ``cases`` in their order, computed on ``jobs`` processes with one progress bar."""
+    import build_fmu
+    from tqdm import tqdm
+
+    fmu_paths = build_fmu.ensure_built()  # once, before the workers start
+    jobs = jobs or default_jobs()
+    show = sys.stderr.isatty() if progress is None else progress
+    outcomes = [None] * len(cases)
+    with tqdm(total=len(cases), desc=description, unit="run", disable=not show, file=sys.stderr) as bar:
+        if jobs == 1:
+            for index, case in enumerate(cases):
+                outcomes[index] = run_case(case, fmu_paths)
+                bar.update()
+            return outcomes
+        context = multiprocessing.get_context("spawn")  # a clean interpreter per worker
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            futures = {pool.submit(run_case, case, fmu_paths): index for index, case in enumerate(cases)}
+            for future in as_completed(futures):
+                outcomes[futures[future]] = future.result()
+                bar.update()
+    return outcomes
+
+
+def as_float(value) -> float:
+    return float(value) if value is not None else float("nan")
+
+
+__all__ = ["Case", "run_case", "run_cases", "default_jobs", "np"]
