@@ -314,10 +314,10 @@ def stable_step_search(name, controller, algorithm, start, stop, scenario_stop, 
                             progress=False)[0]
         return is_stable(outcome, scenario_stop)
 
-    low = start / 4
+    low = start
     while not stable(low):
         low /= 2
-        if low < 1e-7:
+        if low < start / 4:  # unstable even at a quarter of the chosen step: report none
             return None
     high = low * 2
     while high <= limit and stable(high):
