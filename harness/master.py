@@ -18,6 +18,8 @@ numpy array; nothing is looked up by name, allocated or logged per step.
 """
 from __future__ import annotations
 
+import math
+import numbers
 import time as clock
 from dataclasses import dataclass
 from pathlib import Path
@@ -123,6 +125,23 @@ def _check_variable(dotted: str, infos: dict, causality: str, role: str):
         raise ScenarioError(f"{role} {dotted!r} is of type {found.type}; connections and records are Real")
 
 
+def _check_parameter_value(instance: str, parameter: str, value, kind: str):
+    """A scenario value must be a number (not text, not a Boolean), integral for an Integer.
+
+    Range checks stay with the FMU, which names the valid range; this only stops values
+    that float()/int() would silently convert ("0.99") or truncate (1.5 -> 1).
+    """
+    where = f"components.{instance}: parameter {parameter} = {value!r}"
+    if kind == "Boolean":
+        if not isinstance(value, bool):
+            raise ScenarioError(f"{where} is not a Boolean (true or false)")
+        return
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy numbers too
+        raise ScenarioError(f"{where} is not a number")
+    if kind == "Integer" and not (math.isfinite(value) and value == int(value)):
+        raise ScenarioError(f"{where} is not an integer")
+
+
 def validate(scenario: Scenario, infos: dict):
     """Check every name of the scenario against the model descriptions."""
     for name, spec in scenario.components.items():
@@ -132,6 +151,7 @@ def validate(scenario: Scenario, infos: dict):
             if found is None or found.causality != "parameter":
                 raise ScenarioError(f"components.{name}: {info.model_identifier} has no parameter {parameter!r}; "
                                     f"valid: {_names(info, 'parameter')}")
+            _check_parameter_value(name, parameter, spec.parameters[parameter], found.type)
     targets = set()
     for connection in scenario.connections:
         _check_variable(connection.source, infos, "output", "connection from")

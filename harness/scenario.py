@@ -10,6 +10,7 @@ instance named by ``controller_instance``.
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -97,6 +98,11 @@ class Scenario:
 
     @property
     def steps(self) -> int:
+        for name in ("start", "stop", "step"):
+            if not math.isfinite(getattr(self, name)):
+                raise ScenarioError(f"{name} = {getattr(self, name)} is not a finite number")
+        if not self.step > 0:
+            raise ScenarioError(f"step = {self.step} is invalid; the communication step must be > 0")
         count = round((self.stop - self.start) / self.step)
         if count < 1:
             raise ScenarioError(f"stop - start = {self.stop - self.start} is shorter than one step {self.step}")
@@ -115,7 +121,10 @@ def load(name_or_path) -> Scenario:
     if not path.exists():
         raise ScenarioError(f"unknown scenario {str(name_or_path)!r}; valid: {', '.join(scenario_names())}")
     with open(path, "rb") as stream:
-        data = tomllib.load(stream)
+        try:
+            data = tomllib.load(stream)
+        except tomllib.TOMLDecodeError as error:
+            raise ScenarioError(f"{path} is not valid TOML: {error}") from None
     return parse(data, path)
 
 
