@@ -22,6 +22,7 @@ from afc_slave_base import INPUT, OUTPUT, PARAMETER, Variable, finite, non_negat
 from afc_slave_base import TableSlave as Fmi2Slave
 
 DIMENSIONLESS = ""
+_INF = math.inf
 FEEDTHROUGH = ("e", "de", "ym", "dym")
 
 VARIABLES = (
@@ -102,6 +103,10 @@ class AdaptiveFuzzyController(Fmi2Slave):
         u = self.theta1 * xi[0] + self.theta2 * xi[1] + self.theta3 * xi[2] + self.theta4 * xi[3]
         if variant == afc_math.VARIANT_FAE:
             u += self.w_hat
+        if not (-_INF < u < _INF and -_INF < error < _INF and -_INF < error_rate < _INF):  # also NaN
+            self.fail(f"outputs overflow at t = {self.time!r}: u = {u!r}, E = {error!r}, dE = {error_rate!r} "
+                      f"from e = {e!r}, de = {de!r} (latched e(0) = {self.e0!r}, de(0) = {self.de0!r}); "
+                      "the inputs are out of range or the closed loop diverged")
         self.u, self.E, self.dE, self.alpha1, self.alpha2 = u, error, error_rate, alpha1, alpha2
         self.xi = list(xi)
         self.outputs_stale = False
@@ -111,10 +116,17 @@ class AdaptiveFuzzyController(Fmi2Slave):
         gamma, m_theta, delta = self.gamma, self.m_theta, self.delta
         rate = afc_math.projected_rate
         xi = self.xi
-        self.theta1 += step_size * rate(self.theta1, tau, xi[0], gamma, m_theta, delta)
-        self.theta2 += step_size * rate(self.theta2, tau, xi[1], gamma, m_theta, delta)
-        self.theta3 += step_size * rate(self.theta3, tau, xi[2], gamma, m_theta, delta)
-        self.theta4 += step_size * rate(self.theta4, tau, xi[3], gamma, m_theta, delta)
+        theta1 = self.theta1 + step_size * rate(self.theta1, tau, xi[0], gamma, m_theta, delta)
+        theta2 = self.theta2 + step_size * rate(self.theta2, tau, xi[1], gamma, m_theta, delta)
+        theta3 = self.theta3 + step_size * rate(self.theta3, tau, xi[2], gamma, m_theta, delta)
+        theta4 = self.theta4 + step_size * rate(self.theta4, tau, xi[3], gamma, m_theta, delta)
+        w_hat = self.w_hat
         if self.variant == afc_math.VARIANT_FAE:
-            self.w_hat += step_size * self.gamma_w * tau
+            w_hat += step_size * self.gamma_w * tau
+        if not (-_INF < theta1 < _INF and -_INF < theta2 < _INF and -_INF < theta3 < _INF
+                and -_INF < theta4 < _INF and -_INF < w_hat < _INF):  # also False for NaN
+            self.fail(f"adaptation diverged in doStep(t={current_time!r}, h={step_size!r}): tau = {tau!r} "
+                      f"from E = {self.E!r}, dE = {self.dE!r}; theta and w_hat keep their values at t; "
+                      "the inputs are out of range or the closed loop diverged")
+        self.theta1, self.theta2, self.theta3, self.theta4, self.w_hat = theta1, theta2, theta3, theta4, w_hat
         return True
