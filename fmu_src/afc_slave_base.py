@@ -28,6 +28,8 @@ from __future__ import annotations
 import ctypes
 import json
 import math
+import sys
+from abc import ABCMeta
 from dataclasses import dataclass
 from xml.etree.ElementTree import Element, SubElement
 
@@ -135,6 +137,49 @@ def _outlive_pythonfmu_cleanup(slave) -> None:
         _py_incref(owned)
 
 
+class _SlaveMeta(ABCMeta):
+    """Make pythonfmu 0.7's re-execution of the FMU script at every instantiate cheap.
+
+    At every fmi2Instantiate, pythonfmu 0.7's C wrapper (``findClass``) runs the FMU
+    script once more, with the module's globals and a fresh locals dict, to find the
+    slave class; it keeps a reference to a list of each new class's MRO, so every class
+    created there leaks with all its functions (about 10 kB per instantiate, measured
+    in tests/test_reliability.py), and it releases the (borrowed) module globals once.
+    On such a re-execution this metaclass hands back the class already defined in the
+    module instead of building a new one, and takes the one reference to the module
+    globals that the wrapper is about to release (until now the leaked functions held
+    it).  A normal import or ``importlib.reload`` (locals is globals) builds the class
+    as usual.
+    """
+
+    def __new__(mcls, name, bases, namespace, **kwargs):
+        caller = sys._getframe(1)  # the frame running the class statement
+        module_globals = caller.f_globals
+        existing = module_globals.get(name)
+        if (caller.f_locals is not module_globals and isinstance(existing, mcls)
+                and existing.__module__ == namespace.get("__module__")
+                and existing.__qualname__ == namespace.get("__qualname__")):
+            cell = namespace.get("__classcell__")  # set when the class body uses super()
+            if cell is not None:
+                cell.cell_contents = existing
+            _py_incref(module_globals)
+            return existing
+        return super().__new__(mcls, name, bases, namespace, **kwargs)
+
+
+def _drop_duplicate_path(resources) -> None:
+    """Keep one sys.path entry for this FMU's resources folder.
+
+    pythonfmu 0.7 inserts the resources folder at the front of sys.path at every
+    fmi2Instantiate: a host that instantiates thousands of times would grow sys.path,
+    and slow every later import, without bound.
+    """
+    path = sys.path
+    if resources and path.count(resources) > 1:
+        first = path.index(resources)
+        path[first + 1:] = [entry for entry in path[first + 1:] if entry != resources]
+
+
 def _fmi_entry(method):
     """Guard an FMI entry point that is not on the per-step path (see above)."""
     def guarded(self, *args):
@@ -151,7 +196,7 @@ def _fmi_entry(method):
     return guarded
 
 
-class TableSlave(Fmi2Slave):
+class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
     """Base of the project's slaves: registration, validation, fast I/O, state."""
 
     VARIABLES: tuple[Variable, ...] = ()
@@ -161,6 +206,7 @@ class TableSlave(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        _drop_duplicate_path(self.resources)
         self.description = self.MODEL_DESCRIPTION
         self.author = "afc-fmi project"
         self.version = "0.1.0"
