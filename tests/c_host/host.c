@@ -1,0 +1,197 @@
+/*
+ * A minimal FMI 2.0 co-simulation host in C: it runs one FMU's shared library
+ * without any Python on the host side (the pythonfmu binary embeds CPython).
+ *
+ *   host LIBRARY RESOURCE_URI GUID STEP INPUT_VRS OUTPUT_VR [r:VR=VALUE | i:VR=VALUE]... < INPUTS
+ *
+ *   LIBRARY       binaries/linux64/<modelIdentifier>.so of the extracted FMU
+ *   RESOURCE_URI  file:///.../resources of the extracted FMU
+ *   GUID          the guid attribute of modelDescription.xml
+ *   STEP          communication step in s
+ *   INPUT_VRS     comma-separated value references of the Real inputs, e.g. 18,19,20,21
+ *   OUTPUT_VR     value reference of the Real output to print, e.g. 22
+ *   r:VR=VALUE    set a Real parameter; i:VR=VALUE an Integer parameter
+ *   INPUTS        on stdin, one line per communication point: one number per input
+ *
+ * Sequence: fmi2Instantiate, fmi2SetupExperiment(start 0), fmi2EnterInitializationMode,
+ * the parameters, the first input line, fmi2ExitInitializationMode; then for each line
+ * n: set the inputs, get the output and print it (%.17g, one per line), fmi2DoStep(n*STEP,
+ * STEP); finally fmi2Terminate and fmi2FreeInstance.  The FMU's log goes to stderr.
+ *
+ * Exit status: 0 all calls returned fmi2OK; 1 usage; 2 dlopen/dlsym failed;
+ * 3 an FMI call returned a status >= fmi2Error (reported on stderr; the instance is
+ * then freed and the host exits normally, which shows that it survived the error).
+ *
+ * Build and run (tests/test_reliability.py does this):
+ *   cc -O2 -o host tests/c_host/host.c -ldl
+ *   LD_PRELOAD=$LIBPYTHON PYTHONHOME=$PREFIX ./host ...
+ * The pythonfmu binary does not link libpython, so libpython must be loaded first.
+ */
+#include <dlfcn.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* the few FMI 2.0 types this host needs (fmi2TypesPlatform.h, fmi2FunctionTypes.h) */
+typedef void *fmi2Component;
+typedef void *fmi2ComponentEnvironment;
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Integer;
+typedef int fmi2Boolean;
+typedef const char *fmi2String;
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+
+typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String,
+                                   fmi2String, ...);
+typedef void *(*fmi2CallbackAllocateMemory)(size_t, size_t);
+typedef void (*fmi2CallbackFreeMemory)(void *);
+typedef void (*fmi2StepFinished)(fmi2ComponentEnvironment, fmi2Status);
+
+typedef struct {
+    fmi2CallbackLogger logger;
+    fmi2CallbackAllocateMemory allocateMemory;
+    fmi2CallbackFreeMemory freeMemory;
+    fmi2StepFinished stepFinished;
+    fmi2ComponentEnvironment componentEnvironment;
+} fmi2CallbackFunctions;
+
+typedef fmi2Component (*InstantiateT)(fmi2String, fmi2Type, fmi2String, fmi2String,
+                                      const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
+typedef fmi2Status (*SetupExperimentT)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean,
+                                       fmi2Real);
+typedef fmi2Status (*ComponentT)(fmi2Component);
+typedef void (*FreeInstanceT)(fmi2Component);
+typedef fmi2Status (*SetRealT)(fmi2Component, const fmi2ValueReference *, size_t, const fmi2Real *);
+typedef fmi2Status (*GetRealT)(fmi2Component, const fmi2ValueReference *, size_t, fmi2Real *);
+typedef fmi2Status (*SetIntegerT)(fmi2Component, const fmi2ValueReference *, size_t,
+                                  const fmi2Integer *);
+typedef fmi2Status (*DoStepT)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
+
+#define MAX_INPUTS 16
+
+static const char *STATUS[] = {"OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"};
+
+static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
+                   fmi2String category, fmi2String message, ...)
+{
+    char text[4096];
+    va_list args;
+    (void)env;
+    (void)category;
+    va_start(args, message);
+    vsnprintf(text, sizeof text, message, args);
+    va_end(args);
+    fprintf(stderr, "[%s] %s: %s\n", (unsigned)status < 6 ? STATUS[status] : "?",
+            instance ? instance : "", text);
+}
+
+static void *symbol(void *library, const char *name)
+{
+    void *found = dlsym(library, name);
+    if (!found) {
+        fprintf(stderr, "host: missing symbol %s: %s\n", name, dlerror());
+        exit(2);
+    }
+    return found;
+}
+
+static FreeInstanceT free_instance;
+static fmi2Component instance;
+
+/* report a failed call, free the instance (the host must survive it) and stop */
+static void check(fmi2Status status, const char *function)
+{
+    if (status < fmi2Error)
+        return;
+    fprintf(stderr, "host: %s returned %s\n", function,
+            (unsigned)status < 6 ? STATUS[status] : "?");
+    free_instance(instance);
+    fprintf(stderr, "host: instance freed after the error; exiting normally\n");
+    exit(3);
+}
+
+static int read_inputs(double *values, int count)
+{
+    for (int k = 0; k < count; k++)
+        if (scanf("%lf", &values[k]) != 1)
+            return 0;
+    return 1;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 7) {
+        fprintf(stderr, "usage: %s LIBRARY RESOURCE_URI GUID STEP INPUT_VRS OUTPUT_VR "
+                        "[r:VR=VALUE | i:VR=VALUE]... < INPUTS\n", argv[0]);
+        return 1;
+    }
+    const char *library_path = argv[1], *resources = argv[2], *guid = argv[3];
+    double step = strtod(argv[4], NULL);
+    fmi2ValueReference inputs[MAX_INPUTS], output = (fmi2ValueReference)strtoul(argv[6], NULL, 10);
+    int input_count = 0;
+    for (char *token = strtok(argv[5], ","); token && input_count < MAX_INPUTS; token = strtok(NULL, ","))
+        inputs[input_count++] = (fmi2ValueReference)strtoul(token, NULL, 10);
+
+    void *library = dlopen(library_path, RTLD_NOW | RTLD_LOCAL);
+    if (!library) {
+        fprintf(stderr, "host: dlopen failed: %s\n", dlerror());
+        return 2;
+    }
+    InstantiateT instantiate = (InstantiateT)symbol(library, "fmi2Instantiate");
+    SetupExperimentT setup = (SetupExperimentT)symbol(library, "fmi2SetupExperiment");
+    ComponentT enter_init = (ComponentT)symbol(library, "fmi2EnterInitializationMode");
+    ComponentT exit_init = (ComponentT)symbol(library, "fmi2ExitInitializationMode");
+    ComponentT terminate = (ComponentT)symbol(library, "fmi2Terminate");
+    SetRealT set_real = (SetRealT)symbol(library, "fmi2SetReal");
+    GetRealT get_real = (GetRealT)symbol(library, "fmi2GetReal");
+    SetIntegerT set_integer = (SetIntegerT)symbol(library, "fmi2SetInteger");
+    DoStepT do_step = (DoStepT)symbol(library, "fmi2DoStep");
+    free_instance = (FreeInstanceT)symbol(library, "fmi2FreeInstance");
+
+    fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
+    instance = instantiate("c_host", fmi2CoSimulation, guid, resources, &callbacks, 0, 1);
+    if (!instance) {
+        fprintf(stderr, "host: fmi2Instantiate failed\n");
+        return 3;
+    }
+    check(setup(instance, 0, 0.0, 0.0, 0, 0.0), "fmi2SetupExperiment");
+    check(enter_init(instance), "fmi2EnterInitializationMode");
+    for (int k = 7; k < argc; k++) {
+        char kind;
+        unsigned vr;
+        char value[64];
+        if (sscanf(argv[k], "%c:%u=%63s", &kind, &vr, value) != 3 || (kind != 'r' && kind != 'i')) {
+            fprintf(stderr, "host: bad parameter argument %s (want r:VR=VALUE or i:VR=VALUE)\n", argv[k]);
+            free_instance(instance);
+            return 1;
+        }
+        fmi2ValueReference reference = vr;
+        if (kind == 'r') {
+            fmi2Real real = strtod(value, NULL);
+            check(set_real(instance, &reference, 1, &real), "fmi2SetReal (parameter)");
+        } else {
+            fmi2Integer integer = (fmi2Integer)strtol(value, NULL, 10);
+            check(set_integer(instance, &reference, 1, &integer), "fmi2SetInteger (parameter)");
+        }
+    }
+    double row[MAX_INPUTS];
+    int have_row = read_inputs(row, input_count);
+    if (have_row)
+        check(set_real(instance, inputs, (size_t)input_count, row), "fmi2SetReal (start inputs)");
+    check(exit_init(instance), "fmi2ExitInitializationMode");
+    for (long n = 0; have_row; n++) {
+        double time = (double)n * step, value;
+        check(set_real(instance, inputs, (size_t)input_count, row), "fmi2SetReal");
+        check(get_real(instance, &output, 1, &value), "fmi2GetReal");
+        printf("%.17g\n", value);
+        check(do_step(instance, time, step, 1), "fmi2DoStep");
+        have_row = read_inputs(row, input_count);
+    }
+    check(terminate(instance), "fmi2Terminate");
+    free_instance(instance);
+    fflush(stdout);
+    return 0;
+}
