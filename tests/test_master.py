@@ -1,5 +1,6 @@
 """The co-simulation master (issue 4): oracle agreement, delays, failures, scenario mistakes."""
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -96,8 +97,8 @@ def scenario_file(tmp_path, edit):
 
 
 def test_fmu_fault_stops_the_run_naming_instance_function_time_and_log(faulty_fmu, tmp_path, capsys):
-    path = scenario_file(tmp_path, lambda t: t.replace('fmu = "InvertedPendulum"', f'fmu = "{faulty_fmu}"')
-                         .replace("step = 1e-4", "step = 1e-3"))
+    path = scenario_file(tmp_path, lambda t: re.sub(r"(?m)^step = [^ ]*", "step = 1e-3",
+                                                    t.replace('fmu = "InvertedPendulum"', f'fmu = "{faulty_fmu}"')))
     out = tmp_path / "partial.csv"
     code = cli_main(["run", str(path), "--controller", "vud", "--out", str(out)])
     err = capsys.readouterr().err
