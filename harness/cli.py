@@ -75,9 +75,9 @@ def register_run(commands):
 
 def _subcommand_registrations():
     """Each subcommand lives in its own module with a ``register(commands)`` function."""
-    from . import report_tables, sweep
+    from . import regression, report_tables, sweep
 
-    return [register_run, report_tables.register, sweep.register]
+    return [register_run, report_tables.register, sweep.register, regression.register]
 
 
 def build_parser() -> argparse.ArgumentParser:
