@@ -125,8 +125,12 @@ class SweepPlan:
         parameters = {name: {k: v for k, v in spec.parameters.items()
                              if not (name == scenario.controller_instance and k == "variant")}
                       for name, spec in scenario.components.items()}
-        return {"scenario": scenario.name, "start": scenario.start, "stop": scenario.stop, "step": scenario.step,
-                "algorithm": self.algorithm, "grid": self.names, "parameters": parameters}
+        settings = {"scenario": scenario.name, "start": scenario.start, "stop": scenario.stop, "step": scenario.step,
+                    "algorithm": self.algorithm, "grid": self.names, "parameters": parameters}
+        for name in SCENARIO_SETTINGS:
+            if name in self.names:  # a grid axis: the scenario's own value plays no part
+                del settings[name]
+        return settings
 
 
 def _scenario_point(scenario: Scenario, controller: str, names, values) -> Scenario:
@@ -369,14 +373,23 @@ def _ignore_sigint():
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and cancels
 
 
+def _outcome(future) -> tuple:
+    """(row, None), or (None, error) when the worker itself was lost (the point is not recorded)."""
+    try:
+        return future.result(), None
+    except Exception as error:  # noqa: BLE001 - a crashed or killed worker, a pickling error...
+        return None, error
+
+
 class LocalPool:
     """A process pool on this machine (spawned workers: no state inherited from the parent)."""
 
-    def __init__(self, jobs: int):
+    def __init__(self, jobs: int, function=None):
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
         self.jobs = jobs
+        self.function = function or run_point  # tests swap in a module-level wrapper
         self.executor = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
                                             initializer=_ignore_sigint)
 
@@ -386,9 +399,9 @@ class LocalPool:
     def run(self, tasks):
         from concurrent.futures import as_completed
 
-        futures = [self.executor.submit(run_point, task) for task in tasks]
+        futures = [self.executor.submit(self.function, task) for task in tasks]
         for future in as_completed(futures):
-            yield future.result()
+            yield _outcome(future)
 
     def close(self, cancel: bool = False):
         if cancel:  # stop the points under way too: they are not recorded and rerun on resume
@@ -446,7 +459,7 @@ class DaskPool:
             task = dict(task, fmu_hashes=self.hashes)
             self.futures.append(self.client.submit(run_point, task, self.blobs, pure=False))
         for future in as_completed(self.futures):
-            yield future.result()
+            yield _outcome(future)
 
     def close(self, cancel: bool = False):
         if cancel and getattr(self, "futures", None):
@@ -466,14 +479,19 @@ class SweepSummary:
     wall_s: float
     interrupted: bool
     executor: str
+    lost: int = 0  # points whose worker was lost (crash, killed worker): not recorded, rerun on resume
+    lost_reason: str = ""
 
 
 def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | None = None,
-              progress: bool = True, on_row=None, plot: bool = True) -> SweepSummary:
+              progress: bool = True, on_row=None, plot: bool = True, point_function=None) -> SweepSummary:
     """Run every point of the plan not yet in ``out/sweep.csv``; stream rows; draw the heat map.
 
     ``on_row(row, done)`` is called after each row is written (tests interrupt
-    the sweep from there by raising KeyboardInterrupt).
+    the sweep from there by raising KeyboardInterrupt).  A point whose worker
+    is lost (a crash in an FMU, a killed Dask worker) is not recorded: the
+    summary counts it and a resume runs it again.  ``point_function``
+    replaces ``run_point`` on the local pool (tests).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -489,12 +507,13 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
                                          "controllers": list(plan.controllers), "metric": plan.metric}, indent=2))
     sink = CsvSink(csv_path, plan.names, kept)
     wall_start = clock.perf_counter()
-    interrupted, computed, pool = False, 0, None
+    interrupted, computed, pool, lost, lost_reason = False, 0, None, 0, ""
     from tqdm import tqdm
 
     if todo:
         try:
-            pool = DaskPool(scheduler, plan) if scheduler else LocalPool(min(jobs or os.cpu_count() or 1, len(todo)))
+            pool = (DaskPool(scheduler, plan) if scheduler else
+                    LocalPool(min(jobs or os.cpu_count() or 1, len(todo)), point_function))
         except BaseException:
             sink.close()
             raise
@@ -504,19 +523,25 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
     try:
         if todo:
             troubled = 0
-            for row in pool.run([_task(plan, c, v) for c, v in todo]):
+            for row, error in pool.run([_task(plan, c, v) for c, v in todo]):
+                bar.update(1)
+                if error is not None:
+                    lost += 1
+                    lost_reason = lost_reason or _one_line(f"{type(error).__name__}: {error}", 300)
+                    bar.set_postfix(not_ok=troubled, lost=lost)
+                    continue
                 sink.write(row)
                 computed += 1
                 troubled += row["status"] != "ok"
-                bar.update(1)
                 if troubled:
-                    bar.set_postfix(not_ok=troubled)
+                    bar.set_postfix(not_ok=troubled, lost=lost)
                 if on_row is not None:
                     on_row(row, computed)
     except KeyboardInterrupt:
         interrupted = True
     finally:
-        signal.signal(signal.SIGTERM, previous_sigterm)
+        if previous_sigterm is not None:
+            signal.signal(signal.SIGTERM, previous_sigterm)
         bar.close()
         sink.close()
         if pool is not None:
@@ -530,17 +555,18 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
     if plot and rows:
         heatmap_path = plot_heatmap(plan, rows, out / f"heatmap_{plan.metric}.png")
     return SweepSummary(csv_path, heatmap_path, len(wanted), done_before, computed, counts, wall_s,
-                        interrupted, pool.describe() if pool else "nothing to run")
+                        interrupted, pool.describe() if pool else "nothing to run", lost, lost_reason)
 
 
 def _sigterm_as_interrupt():
+    """SIGTERM stops the sweep as Ctrl-C does (the previous handler, or None off the main thread)."""
     def handler(signum, frame):
         raise KeyboardInterrupt
 
     try:
         return signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # not the main thread
-        return signal.getsignal(signal.SIGTERM)
+    except ValueError:  # signals can only be handled in the main thread
+        return None
 
 
 def current_rows(plan: SweepPlan, rows: list) -> list:
@@ -601,9 +627,9 @@ def plot_heatmap(plan: SweepPlan, rows: list, path) -> Path:
     gx = plan.grids[0]
     gy = plan.grids[1] if len(plan.grids) > 1 else None
     ny, nx = panels[0][1].shape
-    cell = max(0.45, min(0.9, 5.0 / max(nx, ny)))
-    width = len(panels) * (nx * cell + 1.3) + 1.4
-    height = ny * cell + 1.9
+    cell = max(0.3, min(0.6, 4.0 / max(nx, ny)))  # inches per cell
+    width = len(panels) * (nx * cell + 0.7) + 1.6
+    height = ny * cell + 1.7
     figure, axes = plt.subplots(1, len(panels), figsize=(width, height), squeeze=False, constrained_layout=True)
     cmap = matplotlib.colormaps["viridis"].with_extremes(bad="white")
     image = None
@@ -637,8 +663,9 @@ def plot_heatmap(plan: SweepPlan, rows: list, path) -> Path:
         else:
             axis.set_yticks([])
     rest = [g.name for g in plan.grids[2:]]
-    title = (f"{plan.scenario.name}: {plan.metric} ({scale} colour scale), stop {plan.scenario.stop:g} s, "
-             f"step {plan.scenario.step:g} s")
+    horizon = ", ".join(f"{name} {getattr(plan.scenario, name):g} s" for name in SCENARIO_SETTINGS
+                        if name not in plan.names)
+    title = f"{plan.scenario.name}: {plan.metric} ({scale} colour scale)" + (f", {horizon}" if horizon else "")
     if rest:
         title += f"\nworst case over {', '.join(rest)}"
     figure.suptitle(title, fontsize=10)
@@ -682,7 +709,10 @@ def sweep_command(args) -> int:
     print(f"  rows     {summary.csv_path}")
     if summary.heatmap_path:
         print(f"  heat map {summary.heatmap_path}")
-    return 130 if summary.interrupted else 0
+    if summary.lost:
+        print(f"error: {summary.lost} point(s) not run, their worker was lost ({summary.lost_reason}); "
+              "run the same command to retry them", file=sys.stderr)
+    return 130 if summary.interrupted else 1 if summary.lost else 0
 
 
 def register(commands):

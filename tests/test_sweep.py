@@ -75,6 +75,7 @@ def test_grid_over_step_and_integer_parameters_is_accepted(fmu_paths):
                             stop=0.1, fmu_paths=fmu_paths)
     assert len(plan.points()) == 8
     assert plan.points()[:2] == [("vud", (1e-3, 1.0)), ("fae", (1e-3, 1.0))]
+    assert "step" not in plan.settings() and plan.settings()["stop"] == 0.1  # a resume ignores the scenario's step
 
 
 # ------------------------------------------------------ local pool vs Dask
@@ -134,6 +135,25 @@ def test_failed_points_are_recorded_and_the_sweep_goes_on(fmu_paths, tmp_path):
     assert summary.counts["fixed"] == {"ok": 1, "diverged": 0, "failed": 1}
     _, rows = rows_of(tmp_path / "sweep.csv")
     assert "lambda_ce = 1.0 is invalid" in rows[("fixed", "1.0")][-1]
+
+
+def crash_on_heavy_payload(task):
+    """A worker that dies (as on a crash inside an FMU) on the points with mp > 0.5."""
+    if task["values"][0] > 0.5:
+        os._exit(3)
+    return sweep.run_point(task)
+
+
+def test_a_lost_worker_loses_points_not_the_sweep_and_resume_runs_them(fmu_paths, tmp_path):
+    plan = sweep.plan_sweep("pendulum_case1", ("vud",), [sweep.parse_grid("plant.mp=0.1,1")],
+                            stop=0.1, step=1e-3, fmu_paths=fmu_paths)
+    first = sweep.run_sweep(plan, tmp_path, jobs=1, progress=False, point_function=crash_on_heavy_payload)
+    assert first.lost >= 1 and "BrokenProcessPool" in first.lost_reason
+    assert first.computed + first.lost == 2
+    rows = sweep.read_rows(tmp_path / "sweep.csv", plan.names)
+    assert all(row["values"] == [0.1] for row in rows)  # a lost point leaves no row behind
+    second = sweep.run_sweep(plan, tmp_path, jobs=1, progress=False)
+    assert (second.done_before, second.computed, second.lost) == (first.computed, 2 - first.computed, 0)
 
 
 # ---------------------------------------------------------- kill and resume
