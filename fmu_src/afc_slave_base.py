@@ -214,6 +214,10 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         self.time = 0.0
         self.initialized = False
         self.outputs_stale = True
+        # Setting an input makes the outputs stale only where some output depends on an
+        # input directly (and always before initialisation, when parameters are set).
+        self._feedthrough = any(v.depends_on for v in self.VARIABLES if v.causality == OUTPUT)
+        self.stale_on_set = True
         names = [v.name for v in self.VARIABLES]
         if len(set(names)) != len(names):
             raise ValueError(f"{type(self).__name__}: duplicate variable names in table")
@@ -289,6 +293,7 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         self.time = self.start_time
         self.initialize(self.start_time)
         self.initialized = True
+        self.stale_on_set = self._feedthrough
         self.outputs_stale = True
 
     @_fmi_entry
@@ -358,7 +363,8 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         except BaseException as error:
             self._crashed("set_real", error)
             raise
-        self.outputs_stale = True
+        if self.stale_on_set:
+            self.outputs_stale = True
 
     def _initial_outputs(self):
         """Outputs in initialization mode (they are InitialUnknowns).
@@ -424,6 +430,7 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         attributes = self.__dict__
         for name in self._state_names():
             attributes[name] = _copy(state[name])
+        self.stale_on_set = self._feedthrough or not self.initialized
         self.outputs_stale = True
 
     @staticmethod

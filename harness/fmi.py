@@ -10,6 +10,7 @@ status so the caller decides, without allocation or exceptions per step.
 from __future__ import annotations
 
 import ctypes
+import functools
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -154,6 +155,20 @@ class Component:
         references = (fmi2ValueReference * count)(*[self.value_reference(n) for n in names])
         values = (fmi2Real * count)()
         return references, values, count
+
+    def real_reader(self, names) -> tuple:
+        """(values array, call) where call() reads ``names`` into values and returns the status."""
+        references, values, count = self.real_buffer(names)
+        return values, functools.partial(self._raw_get_real, self._component, references, count, values)
+
+    def real_writer(self, names) -> tuple:
+        """(values array, call) where call() writes values to ``names`` and returns the status."""
+        references, values, count = self.real_buffer(names)
+        return values, functools.partial(self._raw_set_real, self._component, references, count, values)
+
+    def stepper(self):
+        """call(time, step, 1) -> status: fmi2DoStep bound to this instance."""
+        return functools.partial(self._raw_do_step, self._component)
 
     def set_reals(self, references, values, count) -> int:
         return self._raw_set_real(self._component, references, count, values)

@@ -169,20 +169,19 @@ def validate(scenario: Scenario, infos: dict):
 @dataclass
 class _Read:
     component: Component
-    references: object
-    values: object
-    count: int
+    values: object  # ctypes array the call fills
+    call: object  # () -> status: one fmi2GetReal
     view: np.ndarray  # numpy view of values
     first_column: int  # recorded outputs come first in the buffer
     recorded: int
+    copies = None  # marks a read in the per-step loop
 
 
 @dataclass
 class _Write:
     component: Component
-    references: object
-    values: object
-    count: int
+    values: object  # ctypes array the call sends
+    call: object  # () -> status: one fmi2SetReal
     copies: tuple  # (index in values, source values array, index in source)
 
 
@@ -246,10 +245,10 @@ class Master:
             if kind != "get":
                 continue
             component = self.components[name]
-            references, values, count = component.real_buffer(reads[name])
+            values, call = component.real_reader(reads[name])
             recorded = [v for v in reads[name] if f"{name}.{v}" in scenario.record]
-            read_buffers[name] = _Read(component, references, values, count,
-                                       np.ctypeslib.as_array(values), len(columns), len(recorded))
+            read_buffers[name] = _Read(component, values, call, np.ctypeslib.as_array(values),
+                                       len(columns), len(recorded))
             columns += [f"{name}.{v}" for v in recorded]
         self.plan = []
         for kind, name in self.order:
@@ -258,10 +257,10 @@ class Master:
                 continue
             component = self.components[name]
             incoming = [c for c in scenario.connections if c.target_instance == name]
-            references, values, count = component.real_buffer([c.target_variable for c in incoming])
+            values, call = component.real_writer([c.target_variable for c in incoming])
             copies = tuple((k, read_buffers[c.source_instance].values,
                             reads[c.source_instance].index(c.source_variable)) for k, c in enumerate(incoming))
-            self.plan.append(_Write(component, references, values, count, copies))
+            self.plan.append(_Write(component, values, call, copies))
         self.plan_columns = columns
         # CSV columns in the scenario's record order
         self.column_order = [columns.index(d) for d in scenario.record]
@@ -276,28 +275,26 @@ class Master:
         """
         bound = self.scenario.divergence_bound
         for action in self.plan:
-            if action.__class__ is _Read:
-                status = action.component.get_reals(action.references, action.values, action.count)
+            copies = action.copies
+            if copies is None:  # a read
+                status = action.call()
                 if status > FMI_WARNING:
                     action.component.fail("fmi2GetReal", status, time)
             else:
                 values = action.values
-                for k, source, j in action.copies:
+                for k, source, j in copies:
                     value = source[j]
                     if not -bound < value < bound:  # also False for NaN
                         self._diverged_on_write(action, k, value, time)
                     values[k] = value
-                status = action.component.set_reals(action.references, values, action.count)
+                status = action.call()
                 if status > FMI_WARNING:
-                    self._write_failed(action, status, time)
+                    action.component.fail("fmi2SetReal", status, time)
 
     def _diverged_on_write(self, action: _Write, index: int, value: float, time: float):
         raise Divergence(self._divergence_text(
             time, f"{action.component.name} would be handed {value:.6g} "
                   f"(bound {self.scenario.divergence_bound:g})"))
-
-    def _write_failed(self, action: _Write, status: int, time: float):
-        action.component.fail("fmi2SetReal", status, time)
 
     def _divergence_text(self, time: float, what: str) -> str:
         return (f"diverged at t = {time:.6g} with step {self.scenario.step:g}: {what}; "
@@ -334,29 +331,30 @@ class Master:
                 self._propagate(start)
             for component in self.components.values():
                 component.exit_initialization()
-            reads = [a for a in self.plan if a.__class__ is _Read and a.recorded]
-            components = list(self.components.values())
+            reads = [(a.first_column, a.first_column + a.recorded, a.view[:a.recorded])
+                     for a in self.plan if a.copies is None and a.recorded]
+            steppers = [(component, component.stepper()) for component in self.components.values()]
             bound = scenario.divergence_bound
             every = progress_every or max(1, steps // 200)
             for n in range(steps):
                 t = start + n * step
                 self._propagate(t)
                 row = record[n]
-                for read in reads:
-                    row[read.first_column:read.first_column + read.recorded] = read.view[:read.recorded]
+                for first, last, view in reads:
+                    row[first:last] = view
                 rows_done = n + 1
                 if rows_done % DIVERGENCE_CHECK_EVERY == 0:
                     self._check_bound(record, rows_done - DIVERGENCE_CHECK_EVERY, rows_done, bound)
-                for component in components:
-                    status = component.do_step(t, step)
+                for component, do_step in steppers:
+                    status = do_step(t, step, 1)
                     if status > FMI_WARNING:
                         component.fail("fmi2DoStep", status, t)
                 if progress is not None and rows_done % every == 0:
                     progress(rows_done, steps)
             self._propagate(stop)
             row = record[steps]
-            for read in reads:
-                row[read.first_column:read.first_column + read.recorded] = read.view[:read.recorded]
+            for first, last, view in reads:
+                row[first:last] = view
             rows_done = steps + 1
             self._check_bound(record, max(0, rows_done - DIVERGENCE_CHECK_EVERY - 1), rows_done, bound)
             if progress is not None:

@@ -1,0 +1,15 @@
+"""Benchmark floor: an FMU with the variables of InvertedPendulum whose doStep does no work."""
+from inverted_pendulum_fmu import VARIABLES
+# pythonfmu's C loader needs the literal "class X(Fmi2Slave):"
+from afc_slave_base import TableSlave as Fmi2Slave
+
+
+class NullPendulum(Fmi2Slave):
+    VARIABLES = VARIABLES
+    MODEL_DESCRIPTION = "Benchmark floor: the variables of InvertedPendulum, no computation"
+
+    def compute_outputs(self):
+        self.outputs_stale = False
+
+    def step(self, current_time, step_size):
+        return True
