@@ -394,8 +394,8 @@ def write_report(comparisons, runs, references, directory: Path, tolerances: dic
     lines = [f"# Regression report ({passed}/{len(comparisons)} cases pass)", "",
              f"Generated {datetime.datetime.now().replace(microsecond=0).isoformat()} by "
              "`python -m harness regress`; references in `harness/references/`.",
-             "", "Tolerances (pyfunnel): " + ", ".join(f"{k} = {v:g}" for k, v in tolerances.items()),
-             f"; signals resampled to {POINTS} points over each scenario's horizon.", "", "## Summary", ""]
+             "", "Tolerances (pyfunnel): " + ", ".join(f"{k} = {v:g}" for k, v in tolerances.items())
+             + f"; signals resampled to {POINTS} points over each scenario's horizon.", "", "## Summary", ""]
     lines += _table(summary_rows(comparisons), SUMMARY_HEADER)
     lines += ["", "## Signals", ""]
     rows = []
