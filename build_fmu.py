@@ -44,10 +44,10 @@ FMUS = (
               (BASE, ROOT / "fmu_src" / "afc_math.py")),
     FmuSource("InvertedPendulum", ROOT / "plants" / "inverted_pendulum_fmu.py",
               (BASE, ROOT / "plants" / "inverted_pendulum_model.py",
-               ROOT / "plants" / "plant_integration.py")),
+               ROOT / "plants" / "plant_integration.py", ROOT / "plants" / "rk4_plant_slave.py")),
     FmuSource("Manipulator", ROOT / "plants" / "manipulator_fmu.py",
               (BASE, ROOT / "plants" / "manipulator_model.py",
-               ROOT / "plants" / "plant_integration.py")),
+               ROOT / "plants" / "plant_integration.py", ROOT / "plants" / "rk4_plant_slave.py")),
     FmuSource("TrackingReference", ROOT / "plants" / "tracking_reference_fmu.py", (BASE,)),
 )
 

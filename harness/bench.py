@@ -92,9 +92,7 @@ def engine_us_per_step(engine: str, scenario, folder: Path):
 
 def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None, repeat=3) -> dict:
     """Every figure is the best (smallest) of ``repeat`` measurements, to keep load noise out."""
-    scenario = scenarios.load(scenario_name).with_controller(controller).with_parameter("stop", stop)
-    if step is not None:
-        scenario = scenario.with_parameter("step", step)
+    scenario = scenarios.configure(scenario_name, controller, step, stop)
     figures = {"scenario": scenario.name, "controller": controller, "step": scenario.step, "stop": scenario.stop,
                "steps": scenario.steps, "repeat": repeat}
     notes = {}

@@ -28,14 +28,7 @@ class Case:
     figure_interval: float | None = None  # return signals thinned to this interval (figures)
 
     def build(self) -> scenarios.Scenario:
-        scenario = scenarios.load(self.scenario).with_controller(self.controller)
-        if self.step is not None:
-            scenario = scenario.with_parameter("step", self.step)
-        if self.stop is not None:
-            scenario = scenario.with_parameter("stop", self.stop)
-        for name, value in self.overrides:
-            scenario = scenario.with_parameter(name, value)
-        return scenario
+        return scenarios.configure(self.scenario, self.controller, self.step, self.stop, self.overrides)
 
 
 def run_case(case: Case, fmu_paths: dict | None = None) -> dict:

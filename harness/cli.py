@@ -24,11 +24,7 @@ def _progress_bar(total: int, description: str, enabled: bool):
 
 
 def run_command(args) -> int:
-    scenario = scenarios.load(args.scenario).with_controller(args.controller)
-    if args.step is not None:
-        scenario = scenario.with_parameter("step", args.step)
-    if args.stop is not None:
-        scenario = scenario.with_parameter("stop", args.stop)
+    scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
     progress, close = _progress_bar(scenario.steps, f"{scenario.name}/{args.controller}",
                                     enabled=not args.json and sys.stderr.isatty())
     try:

@@ -403,9 +403,7 @@ def compare_command(args) -> int:
 
     from . import scenario as scenarios
 
-    scenario = scenarios.load(args.scenario).with_controller(args.controller).with_parameter("stop", args.stop)
-    if args.step is not None:
-        scenario = scenario.with_parameter("step", args.step)
+    scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
     with tempfile.TemporaryDirectory(prefix="afc_engines_") as directory:
         results = run_all(scenario, directory, workers=args.workers)
     start = scenario.start + args.skip_steps * scenario.step if args.skip_steps else None

@@ -109,6 +109,21 @@ class Scenario:
         return count
 
 
+def configure(name_or_path, controller: str | None = None, step: float | None = None,
+              stop: float | None = None, overrides=()) -> Scenario:
+    """A scenario with the controller variant, step, stop and ``instance.parameter`` values set."""
+    scenario = load(name_or_path)
+    if controller is not None:
+        scenario = scenario.with_controller(controller)
+    if step is not None:
+        scenario = scenario.with_parameter("step", step)
+    if stop is not None:
+        scenario = scenario.with_parameter("stop", stop)
+    for dotted, value in overrides:
+        scenario = scenario.with_parameter(dotted, value)
+    return scenario
+
+
 def scenario_names() -> list[str]:
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
 

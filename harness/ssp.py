@@ -183,14 +183,9 @@ def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inp
 
 
 def export_command(args) -> int:
-    scenario = scenarios.load(args.scenario).with_controller(args.controller)
-    if args.step is not None:
-        scenario = scenario.with_parameter("step", args.step)
-    if args.stop is not None:
-        scenario = scenario.with_parameter("stop", args.stop)
-    for assignment in args.set or []:
-        dotted, _, value = assignment.partition("=")
-        scenario = scenario.with_parameter(dotted, float(value))
+    overrides = [(dotted, float(value)) for dotted, _, value in
+                 (assignment.partition("=") for assignment in args.set or [])]
+    scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop, overrides)
     out = args.out or f"{scenario.name}_{args.controller}.ssp"
     path = export_ssp(scenario, out, start_inputs=args.start_inputs)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB): {', '.join(scenario.components)}; "

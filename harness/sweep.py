@@ -145,11 +145,7 @@ def plan_sweep(scenario_name, controllers, grids, metric="ITAE", stop=None, step
     """Validate everything against the scenario and the FMUs before any point runs."""
     from .master import ALGORITHMS, Master, resolve_fmu
 
-    scenario = scenarios.load(scenario_name)
-    if stop is not None:
-        scenario = scenario.with_parameter("stop", stop)
-    if step is not None:
-        scenario = scenario.with_parameter("step", step)
+    scenario = scenarios.configure(scenario_name, step=step, stop=stop)
     controllers = tuple(dict.fromkeys(controllers))
     for controller in controllers:
         if controller not in CONTROLLER_VARIANTS:

@@ -17,11 +17,10 @@ Co-simulation semantics:
 import math
 
 import inverted_pendulum_model as model
-import plant_integration
-# pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
-# so the project's base class is imported under that name.
 from afc_slave_base import INPUT, OUTPUT, Variable, finite, positive
-from afc_slave_base import TableSlave as Fmi2Slave
+# pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
+# so the plants' shared base class is imported under that name.
+from rk4_plant_slave import RK4PlantSlave as Fmi2Slave
 
 VARIABLES = (
     positive("gv", 9.8, "m/s2", "gravitational acceleration"),
@@ -42,51 +41,15 @@ VARIABLES = (
 
 class InvertedPendulum(Fmi2Slave):
     VARIABLES = VARIABLES
-    STATE_ATTRIBUTES = ("x1", "x2")
     MODEL_DESCRIPTION = ("Inverted pendulum on a cart, eq. (37) of Pan, Er, Huang, Wang "
                          "(IEEE TFS 2011), with additive disturbance d(t), fixed-step RK4")
+    derivative = staticmethod(model.pendulum_derivative)
 
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.x1 = self.x1_start
-        self.x2 = self.x2_start
-        self._update_params()
-
-    def initialize(self, start_time):
-        self.x1 = float(self.x1_start)
-        self.x2 = float(self.x2_start)
-        self._update_params()
-
-    def _update_params(self):
-        try:
-            self._params = model.pendulum_params(self.gv, self.mc, self.mp, self.lp, self.dist_gain)
-        except ZeroDivisionError:  # mc + mp = 0: invalid, rejected when initialisation ends
-            self._params = None
-
-    def _set_fmu_state(self, state):
-        super()._set_fmu_state(state)
-        self._update_params()  # the derived constants follow the restored parameters
+    def model_params(self):
+        return model.pendulum_params(self.gv, self.mc, self.mp, self.lp, self.dist_gain)
 
     def compute_outputs(self):
         self.y = self.x1
         self.dy = self.x2
         self.d = model.pendulum_disturbance(self.time, self.dist_gain)
         self.outputs_stale = False
-
-    def step(self, current_time, step_size):
-        try:
-            x1, x2 = plant_integration.rk4_advance(
-                model.pendulum_derivative, current_time, self.x1, self.x2, self.u,
-                step_size, self.max_internal_step, self._params)
-        except (ArithmeticError, ValueError) as error:  # overflow, math domain error
-            x1 = x2 = math.nan
-            reason = f" ({error})"
-        else:
-            reason = ""
-        if x1 - x1 != 0.0 or x2 - x2 != 0.0:  # NaN or inf
-            self.fail(f"state diverged in doStep(t={current_time!r}, h={step_size!r}) "
-                      f"from x1={self.x1!r}, x2={self.x2!r} with u={self.u!r}{reason}; "
-                      "the closed loop is unstable at this step size")
-        self.x1 = x1
-        self.x2 = x2
-        return True

@@ -19,11 +19,10 @@ Co-simulation semantics:
 import math
 
 import manipulator_model as model
-import plant_integration
-# pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
-# so the project's base class is imported under that name.
 from afc_slave_base import INPUT, OUTPUT, Variable, finite, non_negative, positive
-from afc_slave_base import TableSlave as Fmi2Slave
+# pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
+# so the plants' shared base class is imported under that name.
+from rk4_plant_slave import RK4PlantSlave as Fmi2Slave
 
 VARIABLES = (
     positive("gv", 9.8, "m/s2", "gravitational acceleration"),
@@ -46,20 +45,13 @@ VARIABLES = (
 
 class Manipulator(Fmi2Slave):
     VARIABLES = VARIABLES
-    STATE_ATTRIBUTES = ("x1", "x2")
     MODEL_DESCRIPTION = ("Single-link manipulator with Coulomb and viscous friction and a varying "
                          "payload, eqs. (38, 39) of Pan, Er, Huang, Wang (IEEE TFS 2011), "
                          "fixed-step RK4")
+    derivative = staticmethod(model.manipulator_derivative)
 
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.x1 = self.x1_start
-        self.x2 = self.x2_start
-        self._update_params()
-
-    def _update_params(self):
-        self._params = model.manipulator_params(self.gv, self.lr, self.dr, self.cr, self.vr,
-                                                self.mr0, self.mr1)
+    def model_params(self):
+        return model.manipulator_params(self.gv, self.lr, self.dr, self.cr, self.vr, self.mr0, self.mr1)
 
     def cross_parameter_errors(self):
         if not self.mr1 < self.mr0:
@@ -67,41 +59,10 @@ class Manipulator(Fmi2Slave):
                     f"= {self.mr0!r} (the payload mr(t) = mr0 + mr1 sin t must stay > 0)"]
         return []
 
-    def initialize(self, start_time):
-        self.x1 = float(self.x1_start)
-        self.x2 = float(self.x2_start)
-        self._update_params()
-
-    def _set_fmu_state(self, state):
-        super()._set_fmu_state(state)
-        self._update_params()  # the derived constants follow the restored parameters
-
-    def _outputs(self, x1, x2):
-        mr = model.manipulator_payload(self.time, self.mr0, self.mr1)
-        self.y = x1
-        self.dy = x2
-        self.d = model.manipulator_friction(x2, model.manipulator_inertia(mr, self.lr),
-                                            self.cr, self.vr)
-        self.mr = mr
-
     def compute_outputs(self):
-        self._outputs(self.x1, self.x2)
+        mr = model.manipulator_payload(self.time, self.mr0, self.mr1)
+        self.y = self.x1
+        self.dy = self.x2
+        self.d = model.manipulator_friction(self.x2, model.manipulator_inertia(mr, self.lr), self.cr, self.vr)
+        self.mr = mr
         self.outputs_stale = False
-
-    def step(self, current_time, step_size):
-        try:
-            x1, x2 = plant_integration.rk4_advance(
-                model.manipulator_derivative, current_time, self.x1, self.x2, self.u,
-                step_size, self.max_internal_step, self._params)
-        except (ArithmeticError, ValueError) as error:  # overflow, math domain error
-            x1 = x2 = math.nan
-            reason = f" ({error})"
-        else:
-            reason = ""
-        if x1 - x1 != 0.0 or x2 - x2 != 0.0:  # NaN or inf
-            self.fail(f"state diverged in doStep(t={current_time!r}, h={step_size!r}) "
-                      f"from x1={self.x1!r}, x2={self.x2!r} with u={self.u!r}{reason}; "
-                      "the closed loop is unstable at this step size")
-        self.x1 = x1
-        self.x2 = x2
-        return True
