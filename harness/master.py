@@ -56,6 +56,7 @@ class RunResult:
     values: np.ndarray  # rows x columns
     wall_s: float
     complete: bool
+    loop_s: float = float("nan")  # the fixed-step loop alone (no instantiation, initialisation, clean-up)
 
     @property
     def rows(self) -> int:
@@ -73,7 +74,9 @@ class RunResult:
 
     @property
     def us_per_step(self) -> float:
-        return 1e6 * self.wall_s / max(self.rows - 1, 1)
+        """Microseconds per communication step of the loop (whole run if it stopped early)."""
+        seconds = self.loop_s if self.loop_s == self.loop_s else self.wall_s
+        return 1e6 * seconds / max(self.rows - 1, 1)
 
     def write_csv(self, path, output_interval: float | None = None) -> Path:
         """FMI cross-check style: time first, quoted ``instance.variable`` header."""
@@ -161,6 +164,11 @@ def validate(scenario: Scenario, infos: dict):
         targets.add(connection.target)
     for dotted in scenario.record:
         _check_variable(dotted, infos, "output", "record")
+    connected = {c.source for c in scenario.connections}
+    for dotted in scenario.bounds:
+        _check_variable(dotted, infos, "output", "bounds")
+        if dotted not in connected and dotted not in scenario.record:
+            raise ScenarioError(f"bounds: {dotted!r} is neither connected nor recorded, so it is never read")
     for role, dotted in scenario.signals.items():
         if dotted not in scenario.record:
             raise ScenarioError(f"signal {role} = {dotted!r} is not in record.variables")
@@ -182,7 +190,9 @@ class _Write:
     component: Component
     values: object  # ctypes array the call sends
     call: object  # () -> status: one fmi2SetReal
-    copies: tuple  # (index in values, source values array, index in source)
+    copies: tuple  # (index in values, source values array, index in source, divergence bound)
+    sources: tuple = ()  # "instance.variable" of each value, for messages
+    targets: tuple = ()
 
 
 def _order(scenario: Scenario, infos: dict, reads: dict, algorithm: str) -> list:
@@ -259,9 +269,12 @@ class Master:
             incoming = [c for c in scenario.connections if c.target_instance == name]
             values, call = component.real_writer([c.target_variable for c in incoming])
             copies = tuple((k, read_buffers[c.source_instance].values,
-                            reads[c.source_instance].index(c.source_variable)) for k, c in enumerate(incoming))
-            self.plan.append(_Write(component, values, call, copies))
+                            reads[c.source_instance].index(c.source_variable), scenario.bound(c.source))
+                           for k, c in enumerate(incoming))
+            self.plan.append(_Write(component, values, call, copies, tuple(c.source for c in incoming),
+                                    tuple(c.target for c in incoming)))
         self.plan_columns = columns
+        self.column_bounds = np.array([scenario.bound(name) for name in columns])
         # CSV columns in the scenario's record order
         self.column_order = [columns.index(d) for d in scenario.record]
 
@@ -273,7 +286,6 @@ class Master:
         handed a non-finite or runaway input; recorded-only outputs are checked
         in blocks of rows.
         """
-        bound = self.scenario.divergence_bound
         for action in self.plan:
             copies = action.copies
             if copies is None:  # a read
@@ -282,7 +294,7 @@ class Master:
                     action.component.fail("fmi2GetReal", status, time)
             else:
                 values = action.values
-                for k, source, j in copies:
+                for k, source, j, bound in copies:
                     value = source[j]
                     if not -bound < value < bound:  # also False for NaN
                         self._diverged_on_write(action, k, value, time)
@@ -292,9 +304,10 @@ class Master:
                     action.component.fail("fmi2SetReal", status, time)
 
     def _diverged_on_write(self, action: _Write, index: int, value: float, time: float):
+        target = action.targets[index]
         raise Divergence(self._divergence_text(
-            time, f"{action.component.name} would be handed {value:.6g} "
-                  f"(bound {self.scenario.divergence_bound:g})"))
+            time, f"{action.sources[index]} = {value:.6g} beyond its bound {self.scenario.bound(action.sources[index]):g} "
+                  f"(on its way to {target})"))
 
     def _divergence_text(self, time: float, what: str) -> str:
         return (f"diverged at t = {time:.6g} with step {self.scenario.step:g}: {what}; "
@@ -334,8 +347,9 @@ class Master:
             reads = [(a.first_column, a.first_column + a.recorded, a.view[:a.recorded])
                      for a in self.plan if a.copies is None and a.recorded]
             steppers = [(component, component.stepper()) for component in self.components.values()]
-            bound = scenario.divergence_bound
+            bound = self.column_bounds
             every = progress_every or max(1, steps // 200)
+            loop_start = clock.perf_counter()
             for n in range(steps):
                 t = start + n * step
                 self._propagate(t)
@@ -357,6 +371,7 @@ class Master:
                 row[first:last] = view
             rows_done = steps + 1
             self._check_bound(record, max(0, rows_done - DIVERGENCE_CHECK_EVERY - 1), rows_done, bound)
+            self.loop_s = clock.perf_counter() - loop_start
             if progress is not None:
                 progress(steps, steps)
         except (FmiError, Divergence, ScenarioError) as error:
@@ -370,7 +385,7 @@ class Master:
             self.components = {}
         return self._result(record, rows_done, clock.perf_counter() - wall_start, complete=True)
 
-    def _check_bound(self, record, first: int, last: int, bound: float):
+    def _check_bound(self, record, first: int, last: int, bound: np.ndarray):
         block = record[first:last]
         with np.errstate(invalid="ignore"):
             bad = ~(np.abs(block) < bound)
@@ -379,7 +394,7 @@ class Master:
             time = self.scenario.start + (first + row) * self.scenario.step
             name = self.plan_columns[column]
             raise Divergence(self._divergence_text(time, f"{name} = {block[row, column]:.6g} "
-                                                   f"(bound {bound:g})"))
+                                                   f"beyond its bound {bound[column]:g}"))
 
     def _result(self, record, rows: int, wall_s: float, complete: bool) -> RunResult:
         scenario = self.scenario
@@ -388,7 +403,8 @@ class Master:
         else:
             values = record[:rows][:, self.column_order]
         time = scenario.start + np.arange(rows) * scenario.step
-        return RunResult(scenario, self.algorithm, time, list(scenario.record), values, wall_s, complete)
+        return RunResult(scenario, self.algorithm, time, list(scenario.record), values, wall_s, complete,
+                         getattr(self, "loop_s", float("nan")) if complete else float("nan"))
 
 
 def simulate(scenario: Scenario, algorithm: str = "feedthrough", fmu_paths: dict | None = None,

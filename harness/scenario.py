@@ -70,7 +70,12 @@ class Scenario:
     signals: dict  # role -> "instance.variable"
     controller_instance: str = "controller"
     divergence_bound: float = 1e8
+    bounds: dict = field(default_factory=dict)  # "instance.variable" -> its own divergence bound
     path: Path | None = None
+
+    def bound(self, dotted: str) -> float:
+        """The divergence bound of one signal: its own, else the scenario's."""
+        return self.bounds.get(dotted, self.divergence_bound)
 
     def with_controller(self, controller: str) -> "Scenario":
         """A copy with the controller variant set (vud, fixed or fae)."""
@@ -174,8 +179,12 @@ def parse(data: dict, path: Path | None = None) -> Scenario:
         components=components, connections=connections, record=record, signals=signals,
         controller_instance=str(data.get("controller_instance", "controller")),
         divergence_bound=float(experiment.get("divergence_bound", 1e8)),
+        bounds={str(name): float(value) for name, value in data.get("bounds", {}).items()},
         path=path,
     )
+    for name, value in scenario.bounds.items():
+        if not value > 0:
+            raise ScenarioError(f"{where}: bounds.{name} = {value!r} must be > 0")
     for role in signals:
         if role not in SIGNAL_ROLES:
             raise ScenarioError(f"{where}: unknown signal role {role!r}; valid: {', '.join(SIGNAL_ROLES)}")
