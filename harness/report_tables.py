@@ -350,15 +350,16 @@ def stable_step_search(name, controller, algorithm, start, stop, scenario_stop, 
 
 def convergence_summary(convergence: dict) -> str:
     lines = ["| scenario | chosen step (s) | largest stable step, ours (vud / fixed / fae) | "
-             "largest stable step, jacobi (vud / fixed / fae) | ratio ours/jacobi (vud) |",
+             "largest stable step, jacobi (vud / fixed / fae) | ratio ours / jacobi (vud / fixed / fae) |",
              "|---|---|---|---|---|"]
     for name, study in convergence.get("scenarios", {}).items():
         ours = study["largest_stable_step"]["feedthrough"]
         jacobi = study["largest_stable_step"]["jacobi"]
-        ratio = (ours["vud"] / jacobi["vud"]) if ours.get("vud") and jacobi.get("vud") else float("nan")
+        ratios = [ours[c] / jacobi[c] if ours.get(c) and jacobi.get(c) else None for c in CONTROLLERS]
         lines.append(f"| {name} | {study['chosen_step']:g} | "
                      + " / ".join(_fmt(ours.get(c), 3) for c in CONTROLLERS) + " | "
-                     + " / ".join(_fmt(jacobi.get(c), 3) for c in CONTROLLERS) + f" | {ratio:.2f} |")
+                     + " / ".join(_fmt(jacobi.get(c), 3) for c in CONTROLLERS) + " | "
+                     + " / ".join(_fmt(r, 3) for r in ratios) + " |")
     criterion = convergence.get("criterion", "")
     return (lines and "\n".join(lines)) + (f"\n\nStep criterion: {criterion}" if criterion else "")
 
