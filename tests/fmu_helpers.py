@@ -26,10 +26,15 @@ class Driven:
     def _log(self, env, instance, status, category, message):
         self.messages.append((status, message.decode("utf-8", "replace")))
 
-    def initialize(self, start_time=0.0, **values):
+    def enter(self, start_time=0.0, **values):
+        """setupExperiment, enterInitializationMode, then set ``values``."""
         self.slave.setupExperiment(startTime=start_time)
         self.slave.enterInitializationMode()
         self.set(**values)
+        return self
+
+    def initialize(self, start_time=0.0, **values):
+        self.enter(start_time, **values)
         self.slave.exitInitializationMode()
         return self
 

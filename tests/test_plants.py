@@ -8,14 +8,12 @@ from __future__ import annotations
 
 import math
 import sys
-from ctypes import byref
 from pathlib import Path
 
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 from fmpy.validation import validate_fmu
 from scipy.integrate import solve_ivp
 
@@ -24,6 +22,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 import build_fmu  # noqa: E402
+from tests.fmu_helpers import Driven  # noqa: E402
 from plants import inverted_pendulum_model, manipulator_model, plant_integration  # noqa: E402
 
 PLANTS = ("InvertedPendulum", "Manipulator", "TrackingReference")
@@ -38,60 +37,15 @@ def plant_fmus():
     return {name: (paths[name], extract(str(paths[name]))) for name in PLANTS}
 
 
-class Instance:
-    """One FMU instance through fmpy's FMU2Slave, with name-based access and its log."""
+class Instance(Driven):
+    """One plant FMU instance (a fresh instance name each time) on the session's extracted FMU."""
 
     count = 0
 
     def __init__(self, fmus, name):
         path, unzip_dir = fmus[name]
-        self.md = read_model_description(str(path))
-        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
-        self.messages = []
         Instance.count += 1
-        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=unzip_dir,
-                               modelIdentifier=self.md.coSimulation.modelIdentifier,
-                               instanceName=f"{name}_{Instance.count}")
-        callbacks = fmi2CallbackFunctions()
-        callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        callbacks.allocateMemory = defaultCallbacks.allocateMemory
-        callbacks.freeMemory = defaultCallbacks.freeMemory
-        try:  # fmpy's native proxy formats printf-style messages before the Python logger
-            from fmpy.logging import addLoggerProxy
-            addLoggerProxy(byref(callbacks))
-        except Exception:
-            pass
-        self._callbacks = callbacks  # keep alive as long as the instance
-        self.slave.instantiate(callbacks=callbacks, loggingOn=True)
-
-    def _log(self, env, instance, status, category, message):
-        self.messages.append((status, message.decode("utf-8", "replace")))
-
-    def enter(self, start_time=0.0, **values):
-        self.slave.setupExperiment(startTime=start_time)
-        self.slave.enterInitializationMode()
-        self.set(**values)
-        return self
-
-    def initialize(self, start_time=0.0, **values):
-        self.enter(start_time, **values)
-        self.slave.exitInitializationMode()
-        return self
-
-    def set(self, **values):
-        if values:
-            self.slave.setReal([self.vr[n] for n in values], [float(v) for v in values.values()])
-
-    def get(self, *names):
-        values = self.slave.getReal([self.vr[n] for n in names])
-        return values[0] if len(names) == 1 else values
-
-    def free(self):
-        try:
-            self.slave.terminate()
-        except Exception:
-            pass
-        self.slave.freeInstance()
+        super().__init__(path, f"{name}_{Instance.count}", unzip_dir=unzip_dir)
 
 
 def pendulum_rhs(t, x, u, gv, mc, mp, lp, dist_gain):
