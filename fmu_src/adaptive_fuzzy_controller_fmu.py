@@ -108,7 +108,7 @@ class AdaptiveFuzzyController(Fmi2Slave):
                       f"from e = {e!r}, de = {de!r} (latched e(0) = {self.e0!r}, de(0) = {self.de0!r}); "
                       "the inputs are out of range or the closed loop diverged")
         self.u, self.E, self.dE, self.alpha1, self.alpha2 = u, error, error_rate, alpha1, alpha2
-        self.xi = list(xi)
+        self.xi = xi  # a tuple; the FMU state stores it as a list
         self.outputs_stale = False
 
     def step(self, current_time, step_size):

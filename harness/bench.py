@@ -5,7 +5,7 @@ On the same ``pendulum_case1``/``vud`` system at the same step:
 2. fmpy's SSP simulator on the exported SSP;
 3. Ecos on the same SSP;
 4. the floor: a bare loop of raw fmpy setReal/doStep/getReal calls on FMUs of the
-   same shape whose doStep does no work (``harness/null_fmus``);
+   same shape whose doStep does no work (built from ``NULL_SCRIPT``);
 5. the in-process oracle (the same math, no FMI);
 each with its ratio to ours.  Speed targets live here, not in timed tests.
 """
@@ -21,21 +21,39 @@ from .fmi import Component, ModelInfo
 from .master import Master
 from .oracle import simulate_oracle
 
-NULL_DIR = Path(__file__).resolve().parent / "null_fmus"
-NULL_FMUS = {  # instance -> (script, model identifier, the FMU whose shape it copies)
-    "plant": ("null_pendulum_fmu.py", "NullPendulum", "InvertedPendulum"),
-    "reference": ("null_reference_fmu.py", "NullReference", "TrackingReference"),
-    "controller": ("null_controller_fmu.py", "NullController", "AdaptiveFuzzyController"),
+NULL_FMUS = {  # instance -> (model identifier, the FMU whose variables it copies)
+    "plant": ("NullPendulum", "InvertedPendulum"),
+    "reference": ("NullReference", "TrackingReference"),
+    "controller": ("NullController", "AdaptiveFuzzyController"),
 }
+NULL_SCRIPT = '''"""Benchmark floor: an FMU with the variables of {shape} whose doStep does no work."""
+from {module} import VARIABLES
+# pythonfmu's C loader needs the literal "class X(Fmi2Slave):"
+from afc_slave_base import TableSlave as Fmi2Slave
+
+
+class {identifier}(Fmi2Slave):
+    VARIABLES = VARIABLES
+    MODEL_DESCRIPTION = "Benchmark floor: the variables of {shape}, no computation"
+
+    def compute_outputs(self):
+        self.outputs_stale = False
+
+    def step(self, current_time, step_size):
+        return True
+'''
 
 
 def build_null_fmus(folder: Path) -> dict:
+    """The floor's FMUs, written from one template into ``folder`` and built there."""
     import build_fmu
 
     paths = {}
-    for instance, (script, identifier, shape) in NULL_FMUS.items():
+    for instance, (identifier, shape) in NULL_FMUS.items():
         source = next(f for f in build_fmu.FMUS if f.model_identifier == shape)
-        paths[instance] = build_fmu.build_script(NULL_DIR / script, folder / f"{identifier}.fmu",
+        script = folder / f"null_{identifier.lower()}_fmu.py"  # a unique module name per FMU
+        script.write_text(NULL_SCRIPT.format(shape=shape, module=source.script.stem, identifier=identifier))
+        paths[instance] = build_fmu.build_script(script, folder / f"{identifier}.fmu",
                                                  (source.script, *source.project_files))
     return paths
 

@@ -1,6 +1,7 @@
 """Run many co-simulations in parallel processes: one case = scenario x controller x settings."""
 from __future__ import annotations
 
+import functools
 import multiprocessing
 import os
 import sys
@@ -56,29 +57,39 @@ def default_jobs() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+def parallel_map(function, items: list, jobs: int | None = None, description: str = "",
+                 progress: bool | None = False) -> list:
+    """[function(item) for item in items] on ``jobs`` processes (default every core), in order.
+
+    Workers are spawned, clean interpreters: loaded FMUs (and Ecos's threads) never cross a
+    fork.  ``function`` must be picklable (a module-level function or a functools.partial).
+    """
+    from tqdm import tqdm
+
+    jobs = max(1, min(len(items), jobs or default_jobs()))
+    show = sys.stderr.isatty() if progress is None else progress
+    results = [None] * len(items)
+    with tqdm(total=len(items), desc=description, unit="run", disable=not show, file=sys.stderr) as bar:
+        if jobs == 1:
+            for index, item in enumerate(items):
+                results[index] = function(item)
+                bar.update()
+            return results
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {pool.submit(function, item): index for index, item in enumerate(items)}
+            for future in as_completed(futures):
+                results[futures[future]] = future.result()
+                bar.update()
+    return results
+
+
 def run_cases(cases: list, jobs: int | None = None, description: str = "co-simulations",
               progress: bool | None = None) -> list:
     """Outcomes of ``cases`` in their order, computed on ``jobs`` processes with one progress bar."""
     import build_fmu
-    from tqdm import tqdm
 
     fmu_paths = build_fmu.ensure_built()  # once, before the workers start
-    jobs = jobs or default_jobs()
-    show = sys.stderr.isatty() if progress is None else progress
-    outcomes = [None] * len(cases)
-    with tqdm(total=len(cases), desc=description, unit="run", disable=not show, file=sys.stderr) as bar:
-        if jobs == 1:
-            for index, case in enumerate(cases):
-                outcomes[index] = run_case(case, fmu_paths)
-                bar.update()
-            return outcomes
-        context = multiprocessing.get_context("spawn")  # a clean interpreter per worker
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-            futures = {pool.submit(run_case, case, fmu_paths): index for index, case in enumerate(cases)}
-            for future in as_completed(futures):
-                outcomes[futures[future]] = future.result()
-                bar.update()
-    return outcomes
+    return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths), cases, jobs, description, progress)
 
 
 def as_float(value) -> float:

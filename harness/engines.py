@@ -55,6 +55,7 @@ Ecos (ecospy 0.7)
 from __future__ import annotations
 
 import ctypes
+import functools
 import time as clock
 import xml.etree.ElementTree as ElementTree
 import zipfile
@@ -348,9 +349,6 @@ def max_deviation(reference: EngineResult, test: EngineResult, name: str, from_t
 
 def run_all(scenario, directory, workers: int | None = None, fmu_paths=None) -> dict:
     """Export ``scenario`` and run it in our master (feedthrough, jacobi), Ecos and fmpy's SSP simulator."""
-    import concurrent.futures
-    import multiprocessing
-    import os
 
     from .ssp import export_ssp
 
@@ -359,16 +357,18 @@ def run_all(scenario, directory, workers: int | None = None, fmu_paths=None) -> 
 
         fmu_paths = build_fmu.ensure_built()
     package = export_ssp(scenario, Path(directory) / f"{scenario.name}.ssp", fmu_paths=fmu_paths)
-    jobs = {"master": (run_master, scenario, "feedthrough", fmu_paths), "jacobi": (run_master, scenario, "jacobi",
-                                                                                    fmu_paths),
-            "ecos": (run_ecos, package), "fmpy": (run_fmpy_ssp, package)}
-    workers = max(1, min(len(jobs), workers or os.cpu_count() or 1))
-    if workers == 1:
-        return {name: job[0](*job[1:]) for name, job in jobs.items()}
-    context = multiprocessing.get_context("spawn")  # Ecos's thread pool and loaded FMUs stay out of the parent
-    with concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = {name: pool.submit(*job) for name, job in jobs.items()}
-        return {name: future.result() for name, future in futures.items()}
+    from .cases import parallel_map
+
+    # spawned workers: Ecos's thread pool and the loaded FMUs stay out of the parent
+    jobs = {"master": functools.partial(run_master, scenario, "feedthrough", fmu_paths),
+            "jacobi": functools.partial(run_master, scenario, "jacobi", fmu_paths),
+            "ecos": functools.partial(run_ecos, package), "fmpy": functools.partial(run_fmpy_ssp, package)}
+    results = parallel_map(_call, list(jobs.values()), workers)
+    return dict(zip(jobs, results))
+
+
+def _call(function):
+    return function()
 
 
 SIDE_BY_SIDE_HEADER = ["engine", "rows", "first t [s]", "wall [s]", "ITAE", "IAE", "Ec", "max |dy|", "max |du|",

@@ -3,13 +3,13 @@
 :class:`Component` wraps one FMI 2.0 co-simulation instance loaded through
 fmpy's low-level ``FMU2Slave``.  Life-cycle calls go through fmpy (which
 raises ``FMICallException`` on a status >= error); the per-step calls
-(``set_reals``, ``get_reals``, ``do_step``) use fmpy's raw ctypes functions
-with value-reference and value arrays prepared once, and return the FMI
-status so the caller decides, without allocation or exceptions per step.
+(``real_reader``, ``real_writer``, ``stepper``) are fmpy's raw ctypes functions
+bound once to the instance and to value-reference and value arrays prepared
+once; they return the FMI status so the caller decides, without allocation
+or exceptions per step.
 """
 from __future__ import annotations
 
-import ctypes
 import functools
 import shutil
 import tempfile
@@ -132,12 +132,6 @@ class Component:
     def exit_initialization(self):
         self._call("fmi2ExitInitializationMode", self.slave.exitInitializationMode)
 
-    def get_state(self):
-        return self._call("fmi2GetFMUstate", self.slave.getFMUstate)
-
-    def set_state(self, state):
-        self._call("fmi2SetFMUstate", lambda: self.slave.setFMUstate(state))
-
     def free(self):
         try:
             self.slave.terminate()
@@ -170,24 +164,10 @@ class Component:
         """call(time, step, 1) -> status: fmi2DoStep bound to this instance."""
         return functools.partial(self._raw_do_step, self._component)
 
-    def set_reals(self, references, values, count) -> int:
-        return self._raw_set_real(self._component, references, count, values)
-
-    def get_reals(self, references, values, count) -> int:
-        return self._raw_get_real(self._component, references, count, values)
-
-    def do_step(self, time: float, step: float) -> int:
-        return self._raw_do_step(self._component, time, step, 1)
-
     def fail(self, function: str, status: int, time: float):
         """Raise the FmiError for a status >= error returned by a per-step call."""
         self.time = time
         raise FmiError(self.name, function, status, time, list(self.log))
 
 
-def as_array(values, count):
-    """A ctypes Real array from a Python sequence (tests and set-up code)."""
-    return (fmi2Real * count)(*values)
-
-
-__all__ = ["Component", "FmiError", "ModelInfo", "as_array", "ctypes"]
+__all__ = ["Component", "FmiError", "ModelInfo"]

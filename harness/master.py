@@ -242,16 +242,17 @@ class Master:
         self.logging_on = logging_on
         self.components: dict[str, Component] = {}
 
-    def _prepare_plan(self):
+    def _prepare_plan(self, algorithm: str | None = None) -> list:
+        """The read/write actions of one communication point; sets the record columns."""
         scenario = self.scenario
         reads = {}
         for name in scenario.components:
             recorded = [d.split(".", 1)[1] for d in scenario.record if d.split(".", 1)[0] == name]
             connected = [c.source_variable for c in scenario.connections if c.source_instance == name]
             reads[name] = list(dict.fromkeys(recorded + connected))
-        self.order = _order(scenario, self.infos, reads, self.algorithm)
+        order = _order(scenario, self.infos, reads, algorithm or self.algorithm)
         read_buffers, columns = {}, []
-        for kind, name in self.order:
+        for kind, name in order:
             if kind != "get":
                 continue
             component = self.components[name]
@@ -260,10 +261,10 @@ class Master:
             read_buffers[name] = _Read(component, values, call, np.ctypeslib.as_array(values),
                                        len(columns), len(recorded))
             columns += [f"{name}.{v}" for v in recorded]
-        self.plan = []
-        for kind, name in self.order:
+        plan = []
+        for kind, name in order:
             if kind == "get":
-                self.plan.append(read_buffers[name])
+                plan.append(read_buffers[name])
                 continue
             component = self.components[name]
             incoming = [c for c in scenario.connections if c.target_instance == name]
@@ -271,14 +272,15 @@ class Master:
             copies = tuple((k, read_buffers[c.source_instance].values,
                             reads[c.source_instance].index(c.source_variable), scenario.bound(c.source))
                            for k, c in enumerate(incoming))
-            self.plan.append(_Write(component, values, call, copies, tuple(c.source for c in incoming),
-                                    tuple(c.target for c in incoming)))
+            plan.append(_Write(component, values, call, copies, tuple(c.source for c in incoming),
+                               tuple(c.target for c in incoming)))
         self.plan_columns = columns
         self.column_bounds = np.array([scenario.bound(name) for name in columns])
         # CSV columns in the scenario's record order
         self.column_order = [columns.index(d) for d in scenario.record]
+        return plan
 
-    def _propagate(self, time: float):
+    def _propagate(self, plan: list, time: float):
         """One pass of reads and writes at a communication point (the per-step path).
 
         Every value handed along a connection is checked against the divergence
@@ -286,7 +288,7 @@ class Master:
         handed a non-finite or runaway input; recorded-only outputs are checked
         in blocks of rows.
         """
-        for action in self.plan:
+        for action in plan:
             copies = action.copies
             if copies is None:  # a read
                 status = action.call()
@@ -329,30 +331,24 @@ class Master:
                 component = self.components[name]
                 component.setup(start, stop)
                 component.set_parameters(spec.parameters)
-            self._prepare_plan()
+            # initial values propagated through the connections in dependency order, for
+            # both algorithms (consistent start values); then the plan of the loop
+            plan = self._prepare_plan("feedthrough")
+            self._propagate(plan, start)
+            if self.algorithm != "feedthrough":
+                plan = self._prepare_plan()
             record = np.empty((steps + 1, len(self.plan_columns)))
-            # initial values propagated through the connections, in dependency order
-            saved_plan = self.plan
-            if self.algorithm == "jacobi":  # consistent initial values for both schemes
-                self.algorithm = "feedthrough"
-                self._prepare_plan()
-                self._propagate(start)
-                self.plan = saved_plan
-                self.algorithm = "jacobi"
-                self._prepare_plan()
-            else:
-                self._propagate(start)
             for component in self.components.values():
                 component.exit_initialization()
             reads = [(a.first_column, a.first_column + a.recorded, a.view[:a.recorded])
-                     for a in self.plan if a.copies is None and a.recorded]
+                     for a in plan if a.copies is None and a.recorded]
             steppers = [(component, component.stepper()) for component in self.components.values()]
             bound = self.column_bounds
             every = progress_every or max(1, steps // 200)
             loop_start = clock.perf_counter()
             for n in range(steps):
                 t = start + n * step
-                self._propagate(t)
+                self._propagate(plan, t)
                 row = record[n]
                 for first, last, view in reads:
                     row[first:last] = view
@@ -365,7 +361,7 @@ class Master:
                         component.fail("fmi2DoStep", status, t)
                 if progress is not None and rows_done % every == 0:
                     progress(rows_done, steps)
-            self._propagate(stop)
+            self._propagate(plan, stop)
             row = record[steps]
             for first, last, view in reads:
                 row[first:last] = view

@@ -24,12 +24,11 @@ per worker, no state shared with a parent that may hold loaded FMUs).
 """
 from __future__ import annotations
 
-import concurrent.futures
 import contextlib
 import datetime
 import io
+import functools
 import json
-import multiprocessing
 import os
 import platform
 import shutil
@@ -137,13 +136,9 @@ def run_cases(cases, workers: int | None = None, fmu_paths: dict | None = None, 
         import build_fmu
 
         fmu_paths = build_fmu.ensure_built()
-    workers = max(1, min(len(cases), workers or os.cpu_count() or 1))
-    if workers == 1:
-        return [run_case(case, fmu_paths, points) for case in cases]
-    context = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = [pool.submit(run_case, case, fmu_paths, points) for case in cases]
-        return [future.result() for future in futures]
+    from .cases import parallel_map
+
+    return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths, points=points), cases, workers)
 
 
 # --------------------------------------------------------------- references

@@ -19,13 +19,11 @@ import json
 import math
 import re
 import sys
-import multiprocessing
 import time as clock
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from . import scenario as scenarios
-from .cases import Case, default_jobs, run_cases
+from .cases import Case, default_jobs, parallel_map, run_cases
 
 ROOT = Path(__file__).resolve().parents[1]
 CONVERGENCE_JSON = scenarios.SCENARIO_DIR / "convergence.json"
@@ -314,14 +312,16 @@ def study_scenario(name: str, start_step: float, finest_step: float, jobs: int, 
             run_level(chosen / fraction)
     scenario_stop = stop or scenarios.load(name).stop
     searches = [(algorithm, c) for algorithm in ("feedthrough", "jacobi") for c in CONTROLLERS]
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        found = list(pool.map(stable_step_search, *zip(*[(name, c, algorithm, chosen, stop, scenario_stop,
-                                                            stability_limit) for algorithm, c in searches])))
+    found = parallel_map(_stable_step_search, [(name, c, algorithm, chosen, stop, scenario_stop, stability_limit)
+                                               for algorithm, c in searches], jobs)
     largest = {"feedthrough": {}, "jacobi": {}}
     for (algorithm, controller), step in zip(searches, found):
         largest[algorithm][controller] = step
     return {"chosen_step": chosen, "ladder": ladder, "largest_stable_step": largest}
+
+
+def _stable_step_search(arguments: tuple):
+    return stable_step_search(*arguments)
 
 
 def stable_step_search(name, controller, algorithm, start, stop, scenario_stop, limit, precision=0.05):
