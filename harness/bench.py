@@ -124,23 +124,35 @@ def ecos_us_per_step(package: Path, scenario) -> tuple[float, float]:
     return 1e6 * loop / scenario.steps, 1e6 * whole / scenario.steps
 
 
-def _measure(figures: dict, notes: dict, key: str, measure, repeat: int):
-    """The best of ``repeat`` measurements into figures[key] (a tuple fills key and key_whole)."""
-    try:
-        values = [measure() for _ in range(repeat)]
-    except Exception as error:  # an engine that fails is reported, not fatal to the benchmark
-        notes[key] = f"{type(error).__name__}: {error}"
-        figures[f"{key}_us"] = None
-        return
-    if isinstance(values[0], tuple):
-        figures[f"{key}_us"] = min(v[0] for v in values)
-        figures[f"{key}_whole_us"] = min(v[1] for v in values)
-    else:
-        figures[f"{key}_us"] = min(values)
+def _best_of(figures: dict, notes: dict, measurements: dict, repeat: int):
+    """Round-robin ``repeat`` times over every measurement; each figure is its best.
+
+    Interleaving puts every figure through the same slow and fast periods of a shared
+    machine (the cost per step of the same code varies up to 1.6x from second to second
+    here), so the ratios stay fair.  A tuple result fills ``key_us`` and ``key_whole_us``;
+    an engine that fails is reported in ``notes``, not fatal to the benchmark.
+    """
+    samples = {key: [] for key in measurements}
+    for _ in range(repeat):
+        for key, measure in measurements.items():
+            if key in notes:
+                continue
+            try:
+                samples[key].append(measure())
+            except Exception as error:
+                notes[key] = f"{type(error).__name__}: {error}"
+    for key, values in samples.items():
+        if not values:
+            figures[f"{key}_us"] = None
+        elif isinstance(values[0], tuple):
+            figures[f"{key}_us"] = min(v[0] for v in values)
+            figures[f"{key}_whole_us"] = min(v[1] for v in values)
+        else:
+            figures[f"{key}_us"] = min(values)
 
 
 def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None, repeat=3) -> dict:
-    """Every figure is the best (smallest) of ``repeat`` measurements, to keep load noise out.
+    """Every figure is the best (smallest) of ``repeat`` interleaved measurements.
 
     ``*_us`` is the stepping loop alone where it can be separated (ours, Ecos, the floor, the
     oracle); ``*_whole_us`` includes instantiation and initialisation, as fmpy's SSP simulator
@@ -152,16 +164,18 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
     figures = {"scenario": scenario.name, "controller": controller, "step": scenario.step, "stop": scenario.stop,
                "steps": scenario.steps, "repeat": repeat}
     notes = {}
-    _measure(figures, notes, "ours_feedthrough", lambda: master_us_per_step(scenario, "feedthrough"), repeat)
-    _measure(figures, notes, "ours_jacobi", lambda: master_us_per_step(scenario, "jacobi"), repeat)
     with tempfile.TemporaryDirectory(prefix="afc_bench_") as folder:
         folder = Path(folder)
         package = ssp.export_ssp(scenario, folder / f"{scenario.name}.ssp")
-        _measure(figures, notes, "fmpy_ssp_whole", lambda: fmpy_ssp_us_per_step(package, scenario), repeat)
-        _measure(figures, notes, "ecos", lambda: ecos_us_per_step(package, scenario), repeat)
         null_paths = build_null_fmus(folder)
-        _measure(figures, notes, "floor", lambda: floor_us_per_step(scenario, null_paths), repeat)
-    _measure(figures, notes, "oracle", lambda: oracle_us_per_step(scenario), repeat)
+        _best_of(figures, notes, {
+            "ours_feedthrough": lambda: master_us_per_step(scenario, "feedthrough"),
+            "ours_jacobi": lambda: master_us_per_step(scenario, "jacobi"),
+            "fmpy_ssp_whole": lambda: fmpy_ssp_us_per_step(package, scenario),
+            "ecos": lambda: ecos_us_per_step(package, scenario),
+            "floor": lambda: floor_us_per_step(scenario, null_paths),
+            "oracle": lambda: oracle_us_per_step(scenario),
+        }, repeat)
     ours, ours_whole = figures["ours_feedthrough_us"], figures["ours_feedthrough_whole_us"]
     figures["real_time_factor"] = scenario.step / (ours * 1e-6)
     for key in ("ours_jacobi_us", "ecos_us", "floor_us", "oracle_us"):
