@@ -71,9 +71,9 @@ def register_run(commands):
 
 def _subcommand_registrations():
     """Each subcommand lives in its own module with a ``register(commands)`` function."""
-    from . import bench, engines, regression, report_tables, ssp, sweep
+    from . import bench, engines, regression, report_tables, ssp, step_study, sweep
 
-    return [register_run, report_tables.register, sweep.register, regression.register, ssp.register,
+    return [register_run, report_tables.register, step_study.register, sweep.register, regression.register, ssp.register,
             engines.register, bench.register]
 
 
