@@ -25,6 +25,12 @@ def _progress_bar(total: int, description: str, enabled: bool):
 
 def run_command(args) -> int:
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
+    if scenario.path is not None and scenario.path.parent == scenarios.SCENARIO_DIR:  # one the study covers
+        from .step_study import step_warning
+
+        warning = step_warning(scenario.name, args.controller, args.algorithm, scenario.step)
+        if warning:
+            print(warning, file=sys.stderr)
     progress, close = _progress_bar(scenario.steps, f"{scenario.name}/{args.controller}",
                                     enabled=not args.json and sys.stderr.isatty())
     try:
@@ -71,10 +77,10 @@ def register_run(commands):
 
 def _subcommand_registrations():
     """Each subcommand lives in its own module with a ``register(commands)`` function."""
-    from . import bench, engines, regression, report_tables, ssp, step_study, sweep
+    from . import bench, engines, hosts, regression, report_tables, ssp, step_study, sweep
 
     return [register_run, report_tables.register, step_study.register, sweep.register, regression.register, ssp.register,
-            engines.register, bench.register]
+            engines.register, bench.register, hosts.register]
 
 
 def build_parser() -> argparse.ArgumentParser:

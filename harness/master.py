@@ -376,6 +376,7 @@ class Master:
                 raise
             raise SimulationFailed(str(error), result, error) from error
         finally:
+            self.logs = {name: component.log for name, component in self.components.items()}  # the FMUs' messages
             for component in self.components.values():
                 component.free()
             self.components = {}

@@ -15,13 +15,13 @@ from pathlib import Path
 
 from . import scenario as scenarios
 from .cases import Case, default_jobs, run_cases
-from .step_study import convergence_summary, largest_stable_step, load_convergence
+from .step_study import convergence_summary, load_convergence, validated_step
 
 CONTROLLERS = tuple(scenarios.CONTROLLER_VARIANTS)  # vud, fixed, fae
 PENDULUM = ("pendulum_case1", "pendulum_case2", "pendulum_case3")
 ALL_SCENARIOS = (*PENDULUM, "manipulator")
 TABLE_COLUMNS = ("scenario", "controller", "ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec",
-                 "umax", "tv_u", "step", "largest_stable_step", "status")
+                 "umax", "tv_u", "step", "validated_step", "status")
 PAPER_METRICS = ("ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec")
 DISTURBANCE_TOLERANCE = 0.10  # "barely changes": ITAE and IAE within 10 % of case 1
 SMOOTHNESS_TOLERANCE = 1.10  # "smooth": tv_u at most 10 % above the smoothest comparison controller
@@ -198,7 +198,7 @@ def report_markdown(rows: list, convergence: dict, figure_paths: list, wall_s: f
         parts.append(f"- **{'reproduced' if verdict else 'not reproduced'}**: {label}.")
         parts += [f"  - {d}" for d in details]
     parts += ["", "## Choices the numbers depend on", "", choices_text(), ""]
-    parts += ["## Communication step and stability", ""]
+    parts += ["## Communication step (validated step, 1 %)", ""]
     if convergence:
         parts += [convergence_summary(convergence), "",
                   "The full evidence (every step of the ladder) is in `docs/convergence.md`.", ""]
@@ -224,7 +224,7 @@ def tables_command(args) -> int:
     peak_mib = peak_memory_mib()
     convergence = load_convergence()
     for row in rows:
-        row["largest_stable_step"] = largest_stable_step(convergence, row["scenario"], row["controller"])
+        row["validated_step"] = validated_step(convergence, row["scenario"], row["controller"])
     write_table(out / "table1.csv", [r for r in rows if r["scenario"] in PENDULUM])
     write_table(out / "table2.csv", [r for r in rows if r["scenario"] == "manipulator"])
     figure_paths = figures(rows, out)

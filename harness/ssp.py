@@ -6,7 +6,8 @@ The package is a zip file holding
   ``source="resources/<ModelIdentifier>.fmu"``, its connectors (the connected
   inputs, the connected and recorded outputs, all Real), the connections,
   a ``ssd:DefaultExperiment`` (start, stop; the communication step is in an
-  annotation, SSP 1.0 has no attribute for it) and, per component, a
+  annotation, SSP 1.0 has no attribute for it: ours, and libcosim's
+  ``osp:FixedStepAlgorithm`` with 0 worker threads) and, per component, a
   ``ssd:ParameterBinding`` to ``resources/<instance>.ssv``;
 * ``resources/<instance>.ssv``: an ``ssv:ParameterSet`` named
   ``initialValues`` with the scenario's parameter values of that instance
@@ -48,6 +49,7 @@ NS_SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 NS_SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 NS_SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 NS_AFC = "https://afc-fmi.invalid/ssp/experiment"  # our annotation (step size), ignored by other tools
+NS_OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"  # libcosim's algorithm annotation
 PARAMETER_SET = "initialValues"
 ANNOTATION_TYPE = "org.afc-fmi.experiment"
 
@@ -139,6 +141,12 @@ def system_structure(scenario: Scenario, infos: dict, sources: dict, name: str) 
     lines.append(f'        <afc:Experiment xmlns:afc="{NS_AFC}" stepSize="{_number(scenario.step)}" '
                  f'parameterSet="{PARAMETER_SET}"/>')
     lines.append("      </ssc:Annotation>")
+    # libcosim reads its algorithm from here; 0 worker threads: pythonfmu FMUs hold the GIL, threads only cost
+    lines.append(f'      <ssc:Annotation type="com.opensimulationplatform" xmlns:osp="{NS_OSP}">')
+    lines.append("        <osp:Algorithm>")
+    lines.append(f'          <osp:FixedStepAlgorithm baseStepSize="{_number(scenario.step)}" numWorkerThreads="0"/>')
+    lines.append("        </osp:Algorithm>")
+    lines.append("      </ssc:Annotation>")
     lines.append("    </ssd:Annotations>")
     lines.append("  </ssd:DefaultExperiment>")
     lines.append("</ssd:SystemStructureDescription>")
@@ -185,12 +193,19 @@ def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inp
 def export_command(args) -> int:
     overrides = [(dotted, float(value)) for dotted, _, value in
                  (assignment.partition("=") for assignment in args.set or [])]
-    scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop, overrides)
+    step, note = args.step, ""
+    if step is None:  # the step a host that delays every link (Jacobi) needs for 1 %
+        from .step_study import load_convergence, validated_step
+
+        step = validated_step(load_convergence(), scenarios.load(args.scenario).name, args.controller, "jacobi")
+        note = (f"; step {step:g} s, the Jacobi validated step (1 %) of docs/convergence.md" if step else
+                "; no Jacobi validated step in the study: the scenario's step")
+    scenario = scenarios.configure(args.scenario, args.controller, step, args.stop, overrides)
     out = args.out or f"{scenario.name}_{args.controller}.ssp"
     path = export_ssp(scenario, out, start_inputs=args.start_inputs)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB): {', '.join(scenario.components)}; "
           f"parameter set '{PARAMETER_SET}'"
-          + ("; connected inputs start at their consistent initial values" if args.start_inputs else ""))
+          + ("; connected inputs start at their consistent initial values" if args.start_inputs else "") + note)
     return 0
 
 
@@ -200,7 +215,9 @@ def register(commands):
     export.add_argument("scenario", help=f"scenario name ({', '.join(scenarios.scenario_names())}) or .toml path")
     export.add_argument("--controller", choices=tuple(scenarios.CONTROLLER_VARIANTS), default="vud")
     export.add_argument("--out", help="the .ssp file to write (default: SCENARIO_CONTROLLER.ssp)")
-    export.add_argument("--step", type=float, help="communication step written to the package (default: the scenario's)")
+    export.add_argument("--step", type=float, help="communication step written to the package (default: the Jacobi "
+                                                   "validated step (1 %%) of the scenario and controller, "
+                                                   "docs/convergence.md)")
     export.add_argument("--stop", type=float, help="stop time of the default experiment (default: the scenario's)")
     export.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE",
                         help="override a parameter value (repeatable), e.g. controller.gamma=290")

@@ -1,6 +1,5 @@
-"""End-to-end: `tables` and `convergence` on a shortened horizon (issue 5)."""
+"""End-to-end: `tables` on a shortened horizon (issue 5); the step study: tests/test_step_study.py."""
 import csv
-import json
 
 from harness.cli import main as cli_main
 
@@ -27,20 +26,3 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys):
         assert (tmp_path / f"{name}.png").stat().st_size > 10_000
         assert f"({name}.png)" in report
     assert "claims:" in out
-
-
-def test_convergence_study_finds_a_step_and_stable_steps(fmu_paths, tmp_path):
-    json_out, markdown_out = tmp_path / "c.json", tmp_path / "c.md"
-    code = cli_main(["convergence", "pendulum_case1", "--stop", "1.5", "--start-step", "1.6e-3",
-                     "--finest-step", "8e-4", "--stability-limit", "0.004", "--jobs", "2",
-                     "--json-out", str(json_out), "--markdown-out", str(markdown_out)])
-    assert code == 0
-    study = json.loads(json_out.read_text())["scenarios"]["pendulum_case1"]
-    assert study["chosen_step"] in (1.6e-3, 8e-4)
-    steps = sorted({o["step"] for o in study["ladder"]["vud"]})
-    assert study["chosen_step"] / 4 in steps and study["chosen_step"] / 2 in steps  # the evidence
-    for algorithm in ("feedthrough", "jacobi"):
-        for controller in ("vud", "fixed", "fae"):
-            largest = study["largest_stable_step"][algorithm][controller]
-            assert largest is None or 0 < largest <= 0.004
-    assert "| pendulum_case1 |" in markdown_out.read_text()

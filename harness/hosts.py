@@ -1,0 +1,636 @@
+"""The host matrix: ``python -m harness hosts`` runs the closed loops in every FMI host this machine has.
+
+Each row is one scenario x controller x host x step, scored the same way for
+every host (ITAE, IAE from the true error ym - y of the plant's and the
+reference's outputs, Ec from the u the plant was given) and compared with our
+converged result (harness/step_study.py) over the same horizon.  Hosts:
+
+* ``ours-feedthrough`` / ``ours-jacobi``: our master (harness/master.py), with
+  consistent initial values.
+* ``fmpy-jacobi`` and ``fmpy-gs-<order>``: a plain fmpy script as a user writes
+  one (``FMU2Slave``; instantiate, set parameters in initialisation mode, exit
+  initialisation, loop): Jacobi, or Gauss-Seidel in each of the six orders;
+  no initial-value propagation (connected inputs keep their start values until
+  the first step).
+* ``fmpy-ssp``: fmpy's SSP simulator on the exported SSP (harness/engines.py).
+* ``ecos``: Ecos (ecospy) on the exported SSP.
+* ``libcosim-ssp``: libcosim (libcosimpy) on the exported SSP, whose OSP
+  annotation asks for 0 worker threads; ``libcosim-api``: the FMUs wired
+  through libcosimpy's API (default worker threads).
+* ``fmutool-parallel`` / ``fmutool-seq-forward`` / ``fmutool-seq-reverse``:
+  fmu-manipulation-toolbox containers run by fmpy: parallel (Jacobi),
+  sequential in the order plant, reference, controller and in the reverse.
+
+Warnings are the FMU log messages with status Warning: from the logger
+callback where the host takes one (our master, the plain fmpy script, the
+container run by fmpy), else from what the host prints (fmpy.ssp prints the
+FMU's messages, Ecos and libcosim log them to the console at level warning):
+the run captures the process's stdout and stderr and keeps the lines that say
+warning.
+
+Nothing the repository tracks is written unless asked: the matrix goes to
+``results/hosts/`` (``--out``); ``--apply`` also writes docs/hosts.md.
+"""
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import json
+import math
+import os
+import re
+import shutil
+import sys
+import tempfile
+import time as clock
+from dataclasses import dataclass
+from itertools import permutations
+from pathlib import Path
+
+import numpy as np
+
+from . import scenario as scenarios
+from .scores import control_energy, iae, itae, total_variation_rate
+
+ROOT = Path(__file__).resolve().parents[1]
+HOSTS_MD = ROOT / "docs" / "hosts.md"
+DEFAULT_OUT = ROOT / "results" / "hosts"
+METRICS = ("ITAE", "IAE", "Ec")
+ACCURACY = 0.01
+COMPONENT_ORDER = ("plant", "reference", "controller")  # the causal order of the loop
+
+
+@dataclass(frozen=True)
+class Host:
+    key: str
+    name: str
+    settings: str
+    family: str  # "feedthrough": our master's validated step applies; "jacobi": the Jacobi one
+    package: str | None = None  # the PyPI distribution it needs beyond the project's dependencies
+
+
+def _gs_hosts() -> list:
+    hosts = []
+    for order in permutations(COMPONENT_ORDER):
+        hosts.append(Host(f"fmpy-gs-{'-'.join(order)}", "plain fmpy script (FMU2Slave)",
+                          f"Gauss-Seidel {' > '.join(order)}; no initial-value propagation", "jacobi"))
+    return hosts
+
+
+HOSTS = [
+    Host("ours-feedthrough", "our master", "feedthrough-aware; consistent initial values", "feedthrough"),
+    Host("ours-jacobi", "our master", "--algorithm jacobi; consistent initial values", "jacobi"),
+    Host("fmpy-jacobi", "plain fmpy script (FMU2Slave)", "Jacobi; no initial-value propagation", "jacobi"),
+    *_gs_hosts(),
+    Host("fmpy-ssp", "fmpy.ssp (simulate_ssp)", "exported SSP with start values of the inputs; Jacobi", "jacobi"),
+    Host("ecos", "Ecos (ecospy)", "exported SSP; Jacobi; propagates initial values", "jacobi", "ecospy"),
+    Host("libcosim-ssp", "libcosim (libcosimpy)", "exported SSP, OSP annotation numWorkerThreads=0; Jacobi",
+         "jacobi", "libcosimpy"),
+    Host("libcosim-api", "libcosim (libcosimpy)", "FMUs wired through its API, default worker threads; Jacobi",
+         "jacobi", "libcosimpy"),
+    Host("fmutool-parallel", "fmu-manipulation-toolbox container", "parallel (Jacobi); run by fmpy", "jacobi",
+         "fmu-manipulation-toolbox"),
+    Host("fmutool-seq-forward", "fmu-manipulation-toolbox container",
+         "sequential plant > reference > controller; run by fmpy", "jacobi", "fmu-manipulation-toolbox"),
+    Host("fmutool-seq-reverse", "fmu-manipulation-toolbox container",
+         "sequential controller > reference > plant; run by fmpy", "jacobi", "fmu-manipulation-toolbox"),
+]
+HOSTS_BY_KEY = {h.key: h for h in HOSTS}
+
+
+class HostUnavailable(RuntimeError):
+    """The host's package cannot be imported here (the message says which and how to install it)."""
+
+
+def host_available(host: Host) -> str | None:
+    """None if the host can run here, else the reason."""
+    import importlib.util
+
+    module = {"ecospy": "ecospy", "libcosimpy": "libcosimpy",
+              "fmu-manipulation-toolbox": "fmu_manipulation_toolbox"}.get(host.package or "")
+    if module and importlib.util.find_spec(module) is None:
+        return f"{host.package} is not installed (pip install -e '.[hosts]')"
+    return None
+
+
+# ---------------------------------------------------------------- a run
+@dataclass
+class Trajectory:
+    """What every host yields: the plant's and reference's outputs and the u applied, on one grid."""
+
+    time: np.ndarray
+    y: np.ndarray
+    dy: np.ndarray
+    ym: np.ndarray
+    dym: np.ndarray
+    u: np.ndarray  # applied over [t_k, t_k + h]
+
+    def scores(self) -> dict:
+        e, de = self.ym - self.y, self.dym - self.dy
+        return {"ITAE": itae(self.time, e, de), "IAE": iae(self.time, e, de), "Ec": control_energy(self.time, self.u),
+                "tv_u": total_variation_rate(self.time, self.u)}
+
+
+@contextlib.contextmanager
+def captured_console():
+    """Capture the process's stdout and stderr (file descriptors 1, 2: C hosts print there too)."""
+    lines: list = []
+    libc = ctypes.CDLL(None)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 1)
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            libc.fflush(None)
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+            sink.seek(0)
+            lines.extend(sink.read().decode("utf-8", "replace").splitlines())
+
+
+def console_warnings(lines: list) -> list:
+    return [line.strip() for line in lines if re.search(r"warn", line, re.IGNORECASE)]
+
+
+def _infos(scenario, fmu_paths):
+    from .fmi import ModelInfo
+    from .master import resolve_fmu
+
+    paths = {name: resolve_fmu(spec.fmu, scenario, fmu_paths) for name, spec in scenario.components.items()}
+    return paths, {name: ModelInfo.read(path) for name, path in paths.items()}
+
+
+def _applied_input(scenario) -> str:
+    """The input the control goes to (``plant.u``)."""
+    source = scenario.signals["u"]
+    return next(c.target for c in scenario.connections if c.source == source)
+
+
+def run_ours(scenario, algorithm: str, fmu_paths) -> tuple:
+    from .master import Master
+
+    master = Master(scenario, algorithm, fmu_paths)
+    result = master.run()
+    warnings = [f"{name}: {line}" for name, log in master.logs.items() for line in log if line.startswith("[WARNING]")]
+    s = result.signal
+    return Trajectory(result.time, s("plant.y"), s("plant.dy"), s("reference.ym"), s("reference.dym"),
+                      s(scenario.signals["u"])), warnings, "FMI logger callback"
+
+
+def run_plain_fmpy(scenario, order: tuple | None, fmu_paths) -> tuple:
+    """A plain fmpy script: no initial-value propagation; Jacobi (order None) or Gauss-Seidel in ``order``."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+    from fmpy.fmi2 import defaultCallbacks
+
+    paths, _ = _infos(scenario, fmu_paths)
+    messages, slaves, folders, keep_alive = [], {}, [], []
+    outputs, vrs = {}, {}
+    for name, spec in scenario.components.items():
+        md = read_model_description(str(paths[name]))
+        folder = extract(str(paths[name]))
+        folders.append(folder)
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                          instanceName=name)
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(
+            lambda env, instance, status, category, message, name=name:
+            messages.append((name, status, message.decode("utf-8", "replace"))))
+        callbacks.allocateMemory = defaultCallbacks.allocateMemory
+        callbacks.freeMemory = defaultCallbacks.freeMemory
+        keep_alive.append(callbacks)
+        slave.instantiate(callbacks=callbacks, loggingOn=True)
+        variables = {v.name: v for v in md.modelVariables}
+        vrs[name] = {n: v.valueReference for n, v in variables.items()}
+        outputs[name] = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+        slave.setupExperiment(startTime=scenario.start)
+        slave.enterInitializationMode()
+        for parameter, value in spec.parameters.items():
+            if variables[parameter].type == "Integer":
+                slave.setInteger([vrs[name][parameter]], [int(value)])
+            else:
+                slave.setReal([vrs[name][parameter]], [float(value)])
+        slave.exitInitializationMode()
+        slaves[name] = slave
+    incoming = {name: [c for c in scenario.connections if c.target_instance == name] for name in slaves}
+    applied = _applied_input(scenario)
+    steps, h = scenario.steps, scenario.step
+    rows = np.empty((steps + 1, 5))
+    latest = {}
+
+    def read(name):
+        for variable, value in zip(outputs[name], slaves[name].getReal([vrs[name][o] for o in outputs[name]])):
+            latest[f"{name}.{variable}"] = value
+
+    def write(name):
+        if incoming[name]:
+            slaves[name].setReal([vrs[name][c.target_variable] for c in incoming[name]],
+                                 [latest[c.source] for c in incoming[name]])
+
+    def record(n):
+        rows[n, :4] = latest["plant.y"], latest["plant.dy"], latest["reference.ym"], latest["reference.dym"]
+
+    try:
+        for name in slaves:
+            read(name)
+        for n in range(steps):
+            t = scenario.start + n * h
+            record(n)
+            rows[n, 4] = latest[scenario.signals["u"]]
+            if order is None:  # Jacobi: every input from the outputs at t, then every doStep
+                for name in slaves:
+                    write(name)
+                for name in slaves:
+                    slaves[name].doStep(currentCommunicationPoint=t, communicationStepSize=h)
+                for name in slaves:
+                    read(name)
+            else:  # Gauss-Seidel: each in turn takes the latest values, steps, publishes
+                for name in order:
+                    write(name)
+                    if name == applied.split(".", 1)[0]:
+                        rows[n, 4] = latest[next(c.source for c in incoming[name] if c.target == applied)]
+                    slaves[name].doStep(currentCommunicationPoint=t, communicationStepSize=h)
+                    read(name)
+        record(steps)
+        rows[steps, 4] = latest[scenario.signals["u"]]
+    finally:
+        for slave in slaves.values():
+            slave.terminate()
+            slave.freeInstance()
+        for folder in folders:
+            shutil.rmtree(folder, ignore_errors=True)
+    time = scenario.start + np.arange(steps + 1) * h
+    warnings = [f"{name}: [WARNING] {text}" for name, status, text in messages if status == 1]
+    return Trajectory(time, *rows.T), warnings, "FMI logger callback"
+
+
+def _from_engine(result, u_column: str) -> Trajectory:
+    s = result.signal
+    return Trajectory(result.time, s("plant.y"), s("plant.dy"), s("reference.ym"), s("reference.dym"), s(u_column))
+
+
+def run_fmpy_ssp(package: Path, scenario) -> tuple:
+    from .engines import run_fmpy_ssp as run
+
+    with captured_console() as lines:
+        result = run(package, stop=scenario.stop, step=scenario.step)
+    return _from_engine(result, "controller.u"), console_warnings(lines), \
+        "console (fmpy prints the FMU's messages; simulate_ssp instantiates with logging off)"
+
+
+def run_ecos(package: Path, scenario) -> tuple:
+    from .engines import run_ecos as run
+
+    with captured_console() as lines:
+        result = run(package, stop=scenario.stop, step=scenario.step, log_level="warn")
+    for folder in Path(tempfile.gettempdir()).glob("ecos_*"):  # Ecos leaves its folders behind
+        shutil.rmtree(folder, ignore_errors=True)
+    return _from_engine(result, "plant.u"), console_warnings(lines), "console (Ecos log level warn)"
+
+
+def _libcosim_trajectory(execution, indices: dict, infos: dict, scenario) -> Trajectory:
+    from libcosimpy.CosimObserver import CosimObserver
+
+    observer = CosimObserver.create_last_value()
+    execution.add_observer(observer)
+    wanted = {"plant": ["y", "dy", "u"], "reference": ["ym", "dym"]}
+    references = {name: [infos[name].variables[v].valueReference for v in names] for name, names in wanted.items()}
+    steps = scenario.steps
+    rows = np.empty((steps, 5))
+    for n in range(steps):
+        execution.step()
+        plant = observer.last_real_values(indices["plant"], references["plant"])
+        reference = observer.last_real_values(indices["reference"], references["reference"])
+        rows[n] = plant[0], plant[1], reference[0], reference[1], plant[2]
+    time = scenario.start + (np.arange(steps) + 1) * scenario.step  # after step n: values at t_{n+1}
+    return Trajectory(time[:-1], *rows[:-1].T)  # the last u would be applied after the stop time
+
+
+def _libcosim_logging():
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+
+    log_output_level(CosimLogLevel.WARNING)
+
+
+def run_libcosim_ssp(package: Path, scenario, fmu_paths) -> tuple:
+    from libcosimpy.CosimExecution import CosimExecution
+
+    _, infos = _infos(scenario, fmu_paths)
+    with captured_console() as lines:
+        _libcosim_logging()
+        folder = Path(tempfile.mkdtemp(prefix="afc_libcosim_"))
+        try:
+            import zipfile
+
+            with zipfile.ZipFile(package) as archive:
+                archive.extractall(folder)
+            execution = CosimExecution.from_ssp_file(str(folder))
+            indices = {name: execution.slave_index_from_instance_name(name) for name in scenario.components}
+            trajectory = _libcosim_trajectory(execution, indices, infos, scenario)
+            del execution
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
+    return trajectory, console_warnings(lines), "console (libcosim log level warning)"
+
+
+def run_libcosim_api(scenario, fmu_paths) -> tuple:
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimSlave import CosimLocalSlave
+
+    paths, infos = _infos(scenario, fmu_paths)
+    with captured_console() as lines:
+        _libcosim_logging()
+        execution = CosimExecution.from_step_size(step_size=int(round(scenario.step * 1e9)))
+        indices = {}
+        for name, spec in scenario.components.items():
+            indices[name] = execution.add_local_slave(CosimLocalSlave(fmu_path=str(paths[name]), instance_name=name))
+            for parameter, value in spec.parameters.items():
+                variable = infos[name].variables[parameter]
+                if variable.type == "Integer":
+                    execution.integer_initial_value(indices[name], variable.valueReference, int(value))
+                else:
+                    execution.real_initial_value(indices[name], variable.valueReference, float(value))
+        for c in scenario.connections:
+            ok = execution.connect_real_variables(
+                indices[c.source_instance], infos[c.source_instance].variables[c.source_variable].valueReference,
+                indices[c.target_instance], infos[c.target_instance].variables[c.target_variable].valueReference)
+            if ok not in (True, 0):
+                raise RuntimeError(f"libcosim refused the connection {c.source} -> {c.target}")
+        trajectory = _libcosim_trajectory(execution, indices, infos, scenario)
+        del execution
+    return trajectory, console_warnings(lines), "console (libcosim log level warning)"
+
+
+def container_description(scenario, fmu_files: dict, order: tuple, sequential: bool) -> dict:
+    """The fmu-manipulation-toolbox JSON description of the closed loop (start values = parameters only)."""
+    link = [[fmu_files[c.source_instance], c.source_variable, fmu_files[c.target_instance], c.target_variable]
+            for c in scenario.connections]
+    exposed = [("plant", "y"), ("plant", "dy"), ("reference", "ym"), ("reference", "dym"), ("controller", "u")]
+    start = [[fmu_files[name], parameter, repr(float(value)) if not isinstance(value, int) else str(value)]
+             for name, spec in scenario.components.items() for parameter, value in spec.parameters.items()]
+    return {"name": "loop.fmu", "step_size": scenario.step, "mt": False, "sequential": sequential,
+            "auto_link": False, "auto_input": False, "auto_output": False, "auto_parameter": False,
+            "fmu": [fmu_files[name] for name in order], "link": link,
+            "output": [[fmu_files[i], v, f"{i}_{v}"] for i, v in exposed], "start": start}
+
+
+def run_container(scenario, fmu_paths, mode: str) -> tuple:
+    from fmpy import simulate_fmu
+    from fmu_manipulation_toolbox.assembly import Assembly
+
+    paths, infos = _infos(scenario, fmu_paths)
+    fmu_files = {name: f"{infos[name].model_identifier}.fmu" for name in scenario.components}
+    order = tuple(reversed(COMPONENT_ORDER)) if mode == "seq-reverse" else COMPONENT_ORDER
+    folder = Path(tempfile.mkdtemp(prefix="afc_container_"))
+    messages = []
+    try:
+        for name in scenario.components:
+            shutil.copy(paths[name], folder / fmu_files[name])
+        description = folder / "loop.json"
+        description.write_text(json.dumps(container_description(scenario, fmu_files, order, mode != "parallel")))
+        with captured_console() as build_lines:
+            Assembly("loop.json", fmu_directory=folder).make_fmu()
+        container = folder / "loop.fmu"
+        if not container.exists():
+            raise RuntimeError("fmucontainer built no FMU: " + " | ".join(build_lines[-5:]))
+
+        def logger(component, instance, status, category, message):
+            messages.append((status, message.decode("utf-8", "replace")))
+
+        names = ["plant_y", "plant_dy", "reference_ym", "reference_dym", "controller_u"]
+        result = simulate_fmu(str(container), start_time=scenario.start, stop_time=scenario.stop,
+                              step_size=scenario.step, output_interval=scenario.step, output=names, logger=logger,
+                              debug_logging=True)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    time = np.asarray(result["time"], dtype=float)
+    columns = [np.asarray(result[n], dtype=float) for n in names]
+    warnings = [f"[WARNING] {text}" for status, text in messages if status == 1]
+    return Trajectory(time, *columns), warnings, "FMI logger callback of the container (fmpy)"
+
+
+def run_host(key: str, scenario, fmu_paths, package: Path | None) -> tuple:
+    if key == "ours-feedthrough":
+        return run_ours(scenario, "feedthrough", fmu_paths)
+    if key == "ours-jacobi":
+        return run_ours(scenario, "jacobi", fmu_paths)
+    if key == "fmpy-jacobi":
+        return run_plain_fmpy(scenario, None, fmu_paths)
+    if key.startswith("fmpy-gs-"):
+        return run_plain_fmpy(scenario, tuple(key[len("fmpy-gs-"):].split("-")), fmu_paths)
+    if key == "fmpy-ssp":
+        return run_fmpy_ssp(package, scenario)
+    if key == "ecos":
+        return run_ecos(package, scenario)
+    if key == "libcosim-ssp":
+        return run_libcosim_ssp(package, scenario, fmu_paths)
+    if key == "libcosim-api":
+        return run_libcosim_api(scenario, fmu_paths)
+    if key.startswith("fmutool-"):
+        return run_container(scenario, fmu_paths, key[len("fmutool-"):])
+    raise ValueError(f"unknown host {key!r}; valid: {', '.join(HOSTS_BY_KEY)}")
+
+
+def host_row(task: tuple) -> dict:
+    """One row of the matrix (in a worker process): run, score, compare with the converged values."""
+    key, name, controller, step, stop, converged, fmu_paths, package, step_kind = task
+    scenario = scenarios.configure(name, controller, step, stop)
+    row = {"scenario": name, "controller": controller, "host": key, "step": step, "stop": scenario.stop,
+           "step_kind": step_kind, "converged": converged}
+    began = clock.perf_counter()
+    try:
+        trajectory, warnings, where = run_host(key, scenario, fmu_paths, package)
+        scores = trajectory.scores()
+        finite = all(math.isfinite(v) for v in scores.values())
+        row.update(status="ok" if finite else "diverged", **scores, warnings=warnings, warnings_from=where,
+                   error={m: scores[m] / converged[m] - 1 for m in METRICS} if finite else None)
+    except Exception as error:  # a host failing is a row with its reason
+        row.update(status="failed", reason=f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}",
+                   warnings=[], error=None)
+    row["wall_s"] = clock.perf_counter() - began
+    return row
+
+
+# --------------------------------------------------------- the matrix
+def converged_values(name: str, controller: str, stop: float | None, fmu_paths, convergence: dict) -> dict:
+    """Our converged ITAE, IAE, Ec: the study's for the full horizon, else Richardson over ``stop``."""
+    scenario = scenarios.load(name)
+    entry = convergence.get("scenarios", {}).get(name, {}).get("controllers", {}).get(controller, {})
+    if (stop is None or stop >= scenario.stop) and entry.get("converged") and not convergence.get("stop"):
+        return {m: entry["converged"][m] for m in METRICS}
+    from .cases import Case, run_case
+    from .step_study import richardson
+
+    fine = entry.get("levels", [scenario.step])[-1] if entry else scenario.step / 4
+    coarse, finer = (run_case(Case(name, controller, step=h, stop=stop), fmu_paths) for h in (fine, fine / 2))
+    if coarse["status"] != "ok" or finer["status"] != "ok":
+        raise RuntimeError(f"{name}/{controller}: our reference runs failed: {coarse['reason'] or finer['reason']}")
+    return richardson(finer, coarse)
+
+
+def plan(names, controllers, host_keys, step_kinds, stop, convergence) -> list:
+    """(host, scenario, controller, step, step kind) of every row."""
+    from .step_study import validated_step
+
+    rows = []
+    for name in names:
+        scenario_step = scenarios.load(name).step
+        for controller in controllers:
+            for key in host_keys:
+                host = HOSTS_BY_KEY[key]
+                steps = {}
+                if "validated" in step_kinds:
+                    validated = validated_step(convergence, name, controller, host.family)
+                    if validated is None:
+                        print(f"note: {name}/{controller}: no {host.family} validated step in the study; "
+                              f"using the scenario's step", file=sys.stderr)
+                        validated = scenario_step
+                    steps[validated] = "validated"
+                if "scenario" in step_kinds:
+                    steps.setdefault(scenario_step, "scenario")
+                for step, kind in steps.items():
+                    rows.append((key, name, controller, step, kind))
+    return rows
+
+
+def hosts_matrix(names, controllers=("vud",), host_keys=None, step_kinds=("validated", "scenario"),
+                 stop: float | None = None, jobs: int | None = None, convergence: dict | None = None) -> dict:
+    import build_fmu
+
+    from .cases import parallel_map
+    from .ssp import export_ssp
+    from .step_study import load_convergence
+
+    convergence = load_convergence() if convergence is None else convergence
+    fmu_paths = build_fmu.ensure_built()
+    host_keys = list(host_keys or HOSTS_BY_KEY)
+    skipped = {}
+    for key in list(host_keys):
+        reason = host_available(HOSTS_BY_KEY[key])
+        if reason:
+            skipped[key] = reason
+            host_keys.remove(key)
+    began = clock.perf_counter()
+    planned = plan(names, controllers, host_keys, step_kinds, stop, convergence)
+    references = {(n, c): converged_values(n, c, stop, fmu_paths, convergence) for n in names for c in controllers}
+    folder = Path(tempfile.mkdtemp(prefix="afc_hosts_"))
+    try:
+        tasks = []
+        for key, name, controller, step, kind in planned:
+            package = None
+            if key in ("fmpy-ssp", "ecos", "libcosim-ssp"):
+                package = folder / f"{name}_{controller}_{step:g}.ssp"
+                if not package.exists():
+                    export_ssp(scenarios.configure(name, controller, step, stop), package, fmu_paths=fmu_paths)
+            tasks.append((key, name, controller, step, stop, references[(name, controller)], fmu_paths, package, kind))
+        tasks.sort(key=lambda t: t[3])  # the finest steps (longest runs) first
+        rows = parallel_map(host_row, tasks, jobs, description="host matrix", progress=None)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    order = {key: i for i, key in enumerate(HOSTS_BY_KEY)}
+    rows.sort(key=lambda r: (names.index(r["scenario"]), r["controller"], order[r["host"]], r["step"]))
+    return {"rows": rows, "skipped": skipped, "wall_s": clock.perf_counter() - began, "stop": stop,
+            "accuracy": ACCURACY}
+
+
+def within(row: dict) -> bool:
+    return row.get("status") == "ok" and all(abs(row["error"][m]) <= ACCURACY for m in METRICS)
+
+
+def _pct(value: float) -> str:
+    return f"{100 * value:+.3g} %"
+
+
+def matrix_markdown(matrix: dict) -> str:
+    from .step_study import validated_step, load_convergence
+
+    convergence = load_convergence()
+    horizon = f"{matrix['stop']:g} s" if matrix.get("stop") else "the scenario's 20 s"
+    lines = ["# The FMUs in other FMI hosts", "",
+             f"Generated by `python -m harness hosts --apply` ({matrix['wall_s']:.0f} s wall on 2 cores; horizon "
+             f"{horizon}). Each row runs the closed loop (controller `vud` unless said) in one host at one "
+             "communication step and compares ITAE, IAE and Ec with our converged result over the same horizon "
+             "(harness/step_study.py; within 1 % = **ok**). *validated* is the validated step (1 %) of "
+             "docs/convergence.md for the host's scheme (our feedthrough master, or Jacobi for every other host); "
+             "*scenario* is the scenario's own step (Table I/II). Warnings are the FMU's log messages with status "
+             "Warning, and where the host gives them to us.", ""]
+    for host in HOSTS:
+        if host.key in matrix.get("skipped", {}):
+            lines.append(f"- `{host.key}` not run: {matrix['skipped'][host.key]}")
+    lines += ["", "| scenario | host | settings | step (s) | ITAE | IAE | Ec | verdict | FMU warnings |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for row in matrix["rows"]:
+        host = HOSTS_BY_KEY[row["host"]]
+        limit = validated_step(convergence, row["scenario"], row["controller"], host.family)
+        step = f"{row['step']:g} ({row['step_kind']})"
+        if row["status"] != "ok":
+            lines.append(f"| {row['scenario']} | {host.name} (`{host.key}`) | {host.settings} | {step} | "
+                         f"{row['status']}: {row.get('reason', '')} |||||")
+            continue
+        error = row["error"]
+        verdict = "**ok**" if within(row) else ("off" + (f" (step > validated {limit:g})"
+                                                         if limit and row["step"] > limit * (1 + 1e-9) else ""))
+        warnings = "; ".join(w.replace("|", "/") for w in row["warnings"][:2]) or "none"
+        if len(row["warnings"]) > 2:
+            warnings += f" (+{len(row['warnings']) - 2} more)"
+        lines.append(f"| {row['scenario']} | {host.name} (`{host.key}`) | {host.settings} | {step} | "
+                     f"{_pct(error['ITAE'])} | {_pct(error['IAE'])} | {_pct(error['Ec'])} | {verdict} | "
+                     f"{warnings} |")
+    lines += ["", "Where the warnings come from: " + "; ".join(sorted({f"`{r['host']}`: {r['warnings_from']}"
+                                                                     for r in matrix["rows"]
+                                                                     if r.get("warnings_from")})) + ".", ""]
+    return "\n".join(lines)
+
+
+def hosts_command(args) -> int:
+    names = args.scenarios or ["pendulum_case1", "manipulator"]
+    for name in names:
+        scenarios.load(name)
+    keys = args.host or list(HOSTS_BY_KEY)
+    for key in keys:
+        if key not in HOSTS_BY_KEY:
+            print(f"error: unknown host {key!r}; valid: {', '.join(HOSTS_BY_KEY)}", file=sys.stderr)
+            return 2
+    matrix = hosts_matrix(names, tuple(args.controller), keys, tuple(args.steps), args.stop, args.jobs)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "hosts.json").write_text(json.dumps(matrix, indent=1))
+    text = matrix_markdown(matrix)
+    (out / "hosts.md").write_text(text)
+    written = [out / "hosts.json", out / "hosts.md"]
+    if args.apply:
+        HOSTS_MD.write_text(text)
+        written.append(HOSTS_MD)
+    for row in matrix["rows"]:
+        error = row.get("error")
+        summary = " / ".join(_pct(error[m]) for m in METRICS) if error else row.get("reason", row["status"])
+        print(f"{row['scenario']:15s} {row['controller']:5s} {row['host']:38s} {row['step']:<8g} {summary}"
+              f"{'  ok' if within(row) else ''}  warnings: {len(row['warnings'])}  [{row['wall_s']:.0f} s]")
+    for key, reason in matrix["skipped"].items():
+        print(f"skipped {key}: {reason}")
+    print(f"host matrix: {len(matrix['rows'])} rows in {matrix['wall_s']:.1f} s wall")
+    print("written: " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def register(commands):
+    command = commands.add_parser("hosts", help="run the closed loops in every FMI host installed here and compare "
+                                                "with our converged result")
+    command.add_argument("scenarios", nargs="*", help="default: pendulum_case1 manipulator")
+    command.add_argument("--controller", nargs="+", choices=tuple(scenarios.CONTROLLER_VARIANTS), default=["vud"])
+    command.add_argument("--host", nargs="+", help=f"hosts to run (default all): {', '.join(HOSTS_BY_KEY)}")
+    command.add_argument("--steps", nargs="+", choices=("validated", "scenario"), default=["validated", "scenario"],
+                         help="which steps: the host scheme's validated step, the scenario's step (default both)")
+    command.add_argument("--stop", type=float, help="shorter horizon (compared with our converged result over it)")
+    command.add_argument("--jobs", type=int, help="parallel processes (default: every core)")
+    command.add_argument("--out", default=str(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT.relative_to(ROOT)}/)")
+    command.add_argument("--apply", action="store_true", help="also write docs/hosts.md (a tracked file)")
+    command.set_defaults(handler=hosts_command)
