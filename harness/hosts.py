@@ -481,7 +481,7 @@ def converged_values(name: str, controller: str, stop: float | None, fmu_paths, 
     return richardson(finer, coarse)
 
 
-def plan(names, controllers, host_keys, step_kinds, stop, convergence) -> list:
+def plan(names, controllers, host_keys, step_kinds, convergence) -> list:
     """(host, scenario, controller, step, step kind) of every row."""
     from .step_study import validated_step
 
@@ -507,7 +507,9 @@ def plan(names, controllers, host_keys, step_kinds, stop, convergence) -> list:
 
 
 def hosts_matrix(names, controllers=("vud",), host_keys=None, step_kinds=("validated", "scenario"),
-                 stop: float | None = None, jobs: int | None = None, convergence: dict | None = None) -> dict:
+                 stop=None, jobs: int | None = None, convergence: dict | None = None) -> dict:
+    """The rows of the matrix; ``stop``: one horizon for every scenario, or {scenario: horizon} (None: 20 s)."""
+    stops = stop if isinstance(stop, dict) else {name: stop for name in names}
     import build_fmu
 
     from .cases import parallel_map
@@ -524,8 +526,9 @@ def hosts_matrix(names, controllers=("vud",), host_keys=None, step_kinds=("valid
             skipped[key] = reason
             host_keys.remove(key)
     began = clock.perf_counter()
-    planned = plan(names, controllers, host_keys, step_kinds, stop, convergence)
-    references = {(n, c): converged_values(n, c, stop, fmu_paths, convergence) for n in names for c in controllers}
+    planned = plan(names, controllers, host_keys, step_kinds, convergence)
+    references = {(n, c): converged_values(n, c, stops.get(n), fmu_paths, convergence)
+                  for n in names for c in controllers}
     folder = Path(tempfile.mkdtemp(prefix="afc_hosts_"))
     try:
         tasks = []
@@ -534,15 +537,17 @@ def hosts_matrix(names, controllers=("vud",), host_keys=None, step_kinds=("valid
             if key in ("fmpy-ssp", "ecos", "libcosim-ssp"):
                 package = folder / f"{name}_{controller}_{step:g}.ssp"
                 if not package.exists():
-                    export_ssp(scenarios.configure(name, controller, step, stop), package, fmu_paths=fmu_paths)
-            tasks.append((key, name, controller, step, stop, references[(name, controller)], fmu_paths, package, kind))
+                    export_ssp(scenarios.configure(name, controller, step, stops.get(name)), package,
+                               fmu_paths=fmu_paths)
+            tasks.append((key, name, controller, step, stops.get(name), references[(name, controller)], fmu_paths,
+                          package, kind))
         tasks.sort(key=lambda t: t[3])  # the finest steps (longest runs) first
         rows = parallel_map(host_row, tasks, jobs, description="host matrix", progress=None)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     order = {key: i for i, key in enumerate(HOSTS_BY_KEY)}
     rows.sort(key=lambda r: (names.index(r["scenario"]), r["controller"], order[r["host"]], r["step"]))
-    return {"rows": rows, "skipped": skipped, "wall_s": clock.perf_counter() - began, "stop": stop,
+    return {"rows": rows, "skipped": skipped, "wall_s": clock.perf_counter() - began, "stops": stops,
             "accuracy": ACCURACY}
 
 
@@ -554,11 +559,30 @@ def _pct(value: float) -> str:
     return f"{100 * value:+.3g} %"
 
 
+def steps_for_hosts(convergence: dict) -> list:
+    """The validated steps a user of another host needs, per scenario (smallest over the three controllers)."""
+    from .step_study import CONTROLLERS, validated_step
+
+    lines = ["## The step to use", "",
+             "The validated step (1 %) of docs/convergence.md, smallest over the three controllers. A host "
+             "that delays every connection one step (Jacobi: Ecos, libcosim, fmpy.ssp, fmu-manipulation-toolbox "
+             "containers, a plain script) needs the Jacobi column; the controller FMU's DefaultExperiment "
+             "stepSize is the pendulum's, and `export-ssp` writes the Jacobi step of its scenario and controller "
+             "into the SSP.", "",
+             "| scenario | Jacobi host (s) | feedthrough-aware master (s) |", "|---|---|---|"]
+    for name in convergence.get("scenarios", {}):
+        jacobi = [validated_step(convergence, name, c, "jacobi") for c in CONTROLLERS]
+        ours = [validated_step(convergence, name, c, "feedthrough") for c in CONTROLLERS]
+        smallest = [f"{min(s for s in steps if s):g}" if any(steps) else "n/a" for steps in (jacobi, ours)]
+        lines.append(f"| {name} | {smallest[0]} | {smallest[1]} |")
+    return lines
+
+
 def matrix_markdown(matrix: dict) -> str:
     from .step_study import validated_step, load_convergence
 
     convergence = load_convergence()
-    horizon = f"{matrix['stop']:g} s" if matrix.get("stop") else "the scenario's 20 s"
+    horizon = ", ".join(f"{name} {stop:g} s" if stop else f"{name} 20 s" for name, stop in matrix["stops"].items())
     lines = ["# The FMUs in other FMI hosts", "",
              f"Generated by `python -m harness hosts --apply` ({matrix['wall_s']:.0f} s wall on 2 cores; horizon "
              f"{horizon}). Each row runs the closed loop (controller `vud` unless said) in one host at one "
@@ -567,10 +591,12 @@ def matrix_markdown(matrix: dict) -> str:
              "docs/convergence.md for the host's scheme (our feedthrough master, or Jacobi for every other host); "
              "*scenario* is the scenario's own step (Table I/II). Warnings are the FMU's log messages with status "
              "Warning, and where the host gives them to us.", ""]
+    lines += steps_for_hosts(convergence) + [""]
     for host in HOSTS:
         if host.key in matrix.get("skipped", {}):
             lines.append(f"- `{host.key}` not run: {matrix['skipped'][host.key]}")
-    lines += ["", "| scenario | host | settings | step (s) | ITAE | IAE | Ec | verdict | FMU warnings |",
+    lines += ["", "## The matrix", "", "Error of ITAE, IAE and Ec against our converged result.", "",
+              "| scenario | host | settings | step (s) | ITAE | IAE | Ec | verdict | FMU warnings |",
               "|---|---|---|---|---|---|---|---|---|"]
     for row in matrix["rows"]:
         host = HOSTS_BY_KEY[row["host"]]
@@ -604,7 +630,17 @@ def hosts_command(args) -> int:
         if key not in HOSTS_BY_KEY:
             print(f"error: unknown host {key!r}; valid: {', '.join(HOSTS_BY_KEY)}", file=sys.stderr)
             return 2
-    matrix = hosts_matrix(names, tuple(args.controller), keys, tuple(args.steps), args.stop, args.jobs)
+    stops = {}
+    for item in args.stop or []:
+        name, _, value = item.rpartition("=")
+        try:
+            for target in ([name] if name else names):
+                stops[target] = float(value)
+        except ValueError:
+            print(f"error: --stop {item!r}: give seconds, or SCENARIO=seconds", file=sys.stderr)
+            return 2
+    matrix = hosts_matrix(names, tuple(args.controller), keys, tuple(args.steps),
+                          {name: stops.get(name) for name in names}, args.jobs)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "hosts.json").write_text(json.dumps(matrix, indent=1))
@@ -634,7 +670,9 @@ def register(commands):
     command.add_argument("--host", nargs="+", help=f"hosts to run (default all): {', '.join(HOSTS_BY_KEY)}")
     command.add_argument("--steps", nargs="+", choices=("validated", "scenario"), default=["validated", "scenario"],
                          help="which steps: the host scheme's validated step, the scenario's step (default both)")
-    command.add_argument("--stop", type=float, help="shorter horizon (compared with our converged result over it)")
+    command.add_argument("--stop", nargs="+", metavar="[SCENARIO=]SECONDS",
+                         help="shorter horizon, for every scenario or one (compared with our converged result over "
+                              "the same horizon); default the scenarios' 20 s")
     command.add_argument("--jobs", type=int, help="parallel processes (default: every core)")
     command.add_argument("--out", default=str(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT.relative_to(ROOT)}/)")
     command.add_argument("--apply", action="store_true", help="also write docs/hosts.md (a tracked file)")

@@ -42,7 +42,9 @@ from __future__ import annotations
 import json
 import math
 import re
+import shutil
 import sys
+import tempfile
 import time as clock
 from pathlib import Path
 
@@ -184,13 +186,27 @@ def _slim(outcome: dict) -> dict:
     return {k: outcome[k] for k in keep if k in outcome}
 
 
+def previous_runs(study: dict, name: str, controller: str) -> dict:
+    """{(algorithm, step): outcome} of a previous study's 20 s runs (this format, or the older "ladder" one)."""
+    entry = study.get("scenarios", {}).get(name, {})
+    if study.get("stop"):
+        return {}
+    outcomes = entry.get("controllers", {}).get(controller, {}).get("runs") or entry.get("ladder", {}).get(controller, [])
+    return {(o.get("algorithm", "feedthrough"), float(f"{o['step']:.12g}")): dict(_slim(o), reused=True)
+            for o in outcomes}
+
+
 def study_controller(name: str, controller: str, start: float, finest: float, limit: float,
-                     stop: float | None, fmu_paths: dict | None = None, algorithms=ALGORITHMS) -> dict:
+                     stop: float | None, fmu_paths: dict | None = None, algorithms=ALGORITHMS,
+                     reuse: dict | None = None) -> dict:
     """Converged values and validated steps of one scenario x controller (sequential runs)."""
-    runs = {}
+    runs = dict(reuse or {})
+
+    touched = set()
 
     def run(step: float, algorithm: str) -> dict:
         key = (algorithm, float(f"{step:.12g}"))
+        touched.add(key)
         if key not in runs:
             runs[key] = _slim(run_case(Case(name, controller, step=key[1], stop=stop, algorithm=algorithm),
                                        fmu_paths))
@@ -226,32 +242,39 @@ def study_controller(name: str, controller: str, start: float, finest: float, li
     for outcome in runs.values():
         if converged is not None and outcome["status"] == "ok":
             outcome["error_pct"] = {m: 100 * (outcome[m] / converged[m] - 1) for m in METRICS}
-    result["runs"] = sorted(runs.values(), key=lambda o: (o["algorithm"], -o["step"]))
+    used = {id(o) for o in runs.values() if not o.get("reused")} | {id(runs[k]) for k in touched}
+    result["runs"] = sorted((o for o in runs.values() if id(o) in used), key=lambda o: (o["algorithm"], -o["step"]))
     return result
 
 
 def _study_task(arguments: tuple) -> tuple:
-    name, controller, start, finest, limit, stop, fmu_paths = arguments
+    name, controller, start, finest, limit, stop, fmu_paths, reuse = arguments
     began = clock.perf_counter()
-    result = study_controller(name, controller, start, finest, limit, stop, fmu_paths)
+    result = study_controller(name, controller, start, finest, limit, stop, fmu_paths, reuse=reuse)
     result["wall_s"] = clock.perf_counter() - began
     return name, controller, result
 
 
 def study(names: list, jobs: int, stop: float | None = None, start_step: float | None = None,
-          finest_factor: float = 16.0, limit: float = 0.05, controllers=CONTROLLERS) -> dict:
+          finest_factor: float = 16.0, limit: float = 0.05, controllers=CONTROLLERS, reuse: dict | None = None) -> dict:
     """The whole study: one task per scenario x controller, longest first, on ``jobs`` processes."""
     import build_fmu
 
-    fmu_paths = build_fmu.ensure_built()
+    # a private copy of the FMUs: a rebuild during the study (minutes to an hour) must not pull them away
+    snapshot = Path(tempfile.mkdtemp(prefix="afc_step_study_"))
+    fmu_paths = {name: Path(shutil.copy(path, snapshot / path.name)) for name, path in build_fmu.ensure_built().items()}
     tasks = []
     for name in names:
         start = start_step or scenarios.load(name).step
         for controller in controllers:
-            tasks.append((name, controller, start, start / finest_factor, limit, stop, fmu_paths))
+            previous = previous_runs(reuse, name, controller) if reuse and stop is None else {}
+            tasks.append((name, controller, start, start / finest_factor, limit, stop, fmu_paths, previous))
     tasks.sort(key=lambda t: t[2])  # finest start first: the longest tasks start first
     began = clock.perf_counter()
-    done = parallel_map(_study_task, tasks, jobs, description="step study", progress=None)
+    try:
+        done = parallel_map(_study_task, tasks, jobs, description="step study", progress=None)
+    finally:
+        shutil.rmtree(snapshot, ignore_errors=True)
     convergence = {"criterion": criterion_text(), "accuracy": ACCURACY, "stop": stop, "scenarios": {}}
     for name in names:
         convergence["scenarios"][name] = {"start_step": next(t[2] for t in tasks if t[0] == name),
@@ -365,8 +388,11 @@ def convergence_command(args) -> int:
         stop = convergence.get("stop")
         controllers = tuple(next(iter(convergence["scenarios"].values()))["controllers"])
     else:
+        reuse = json.loads(Path(args.reuse).read_text()) if args.reuse else None
         convergence = study(names, jobs, stop=stop, start_step=args.start_step, finest_factor=args.finest_factor,
-                            limit=args.limit, controllers=controllers)
+                            limit=args.limit, controllers=controllers, reuse=reuse)
+        if args.reuse:
+            convergence["reused_from"] = args.reuse
     for name, entry in convergence["scenarios"].items():
         print(f"{name}: chosen step {entry['chosen_step']:g} s" + (f" ({entry['chosen_note']})"
                                                                     if entry["chosen_note"] else ""))
@@ -413,6 +439,8 @@ def register(commands):
     command.add_argument("--out", default=str(DEFAULT_OUT),
                          help=f"output folder (default {DEFAULT_OUT.relative_to(ROOT)}/)")
     command.add_argument("--from-json", help="do not run: rewrite the outputs from this study's convergence.json")
+    command.add_argument("--reuse", help="take the 20 s runs a previous study's convergence.json holds instead of "
+                                         "running them again (runs are deterministic; marked 'reused')")
     command.add_argument("--apply", action="store_true",
                          help="also write harness/scenarios/convergence.json, docs/convergence.md and the chosen "
                               "step into each scenario file (tracked files)")

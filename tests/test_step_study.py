@@ -3,6 +3,7 @@ import json
 import math
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -162,5 +163,8 @@ def test_export_ssp_carries_the_jacobi_validated_step_unless_given(fmu_paths, co
     package = tmp_path / "p.ssp"
     assert cli_main(["export-ssp", "manipulator", "--controller", "fae", "--out", str(package)]) == 0
     assert read_package(package).step == step_study.validated_step(committed, "manipulator", "fae", "jacobi")
+    with zipfile.ZipFile(package) as archive:  # libcosim's algorithm: the same step, no worker threads
+        ssd = archive.read("SystemStructure.ssd").decode()
+    assert f'baseStepSize="{read_package(package).step!r}" numWorkerThreads="0"' in ssd
     assert cli_main(["export-ssp", "manipulator", "--out", str(package), "--step", "1e-3"]) == 0
     assert read_package(package).step == 1e-3
