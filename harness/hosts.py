@@ -458,7 +458,8 @@ def host_row(task: tuple) -> dict:
         row.update(status="ok" if finite else "diverged", **scores, warnings=warnings, warnings_from=where,
                    error={m: scores[m] / converged[m] - 1 for m in METRICS} if finite else None)
     except Exception as error:  # a host failing is a row with its reason
-        row.update(status="failed", reason=f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}",
+        first_line = str(error).splitlines()[0] if str(error) else ""
+        row.update(status="failed", reason=f"{type(error).__name__}: {first_line}",
                    warnings=[], error=None)
     row["wall_s"] = clock.perf_counter() - began
     return row
@@ -688,6 +689,7 @@ def register(commands):
                          help="shorter horizon, for every scenario or one (compared with our converged result over "
                               "the same horizon); default the scenarios' 20 s")
     command.add_argument("--jobs", type=int, help="parallel processes (default: every core)")
-    command.add_argument("--out", default=str(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT.relative_to(ROOT)}/)")
+    command.add_argument("--out", default=str(DEFAULT_OUT),
+                         help=f"output folder (default {DEFAULT_OUT.relative_to(ROOT)}/)")
     command.add_argument("--apply", action="store_true", help="also write docs/hosts.md (a tracked file)")
     command.set_defaults(handler=hosts_command)

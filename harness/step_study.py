@@ -191,7 +191,8 @@ def previous_runs(study: dict, name: str, controller: str) -> dict:
     entry = study.get("scenarios", {}).get(name, {})
     if study.get("stop"):
         return {}
-    outcomes = entry.get("controllers", {}).get(controller, {}).get("runs") or entry.get("ladder", {}).get(controller, [])
+    outcomes = (entry.get("controllers", {}).get(controller, {}).get("runs")
+                or entry.get("ladder", {}).get(controller, []))
     return {(o.get("algorithm", "feedthrough"), float(f"{o['step']:.12g}")): dict(_slim(o), reused=True)
             for o in outcomes}
 
