@@ -168,3 +168,17 @@ def test_export_ssp_carries_the_jacobi_validated_step_unless_given(fmu_paths, co
     assert f'baseStepSize="{read_package(package).step!r}" numWorkerThreads="0"' in ssd
     assert cli_main(["export-ssp", "manipulator", "--out", str(package), "--step", "1e-3"]) == 0
     assert read_package(package).step == 1e-3
+
+
+def test_runs_are_scored_on_the_true_tracking_error(fmu_paths):
+    """With every link delayed, the reference's e(t_n) = ym(t_n) - y(t_{n-1}): the study scores ym - y instead."""
+    from harness.master import simulate
+    from harness.scores import itae
+
+    scored = step_study.run_scored("pendulum_case1", "vud", 2e-4, 2.0, "jacobi", fmu_paths)
+    result = simulate(scenarios.configure("pendulum_case1", "vud", 2e-4, 2.0), "jacobi", fmu_paths)
+    s = result.signal
+    true = itae(result.time, s("reference.ym") - s("plant.y"), s("reference.dym") - s("plant.dy"))
+    delayed = itae(result.time, s("reference.e"), s("reference.de"))
+    assert scored["ITAE"] == true
+    assert abs(delayed / true - 1) > 1e-3, (delayed, true)
