@@ -1,0 +1,202 @@
+/* AdaptiveFuzzyController: the variable-universe direct adaptive fuzzy controller of
+ * Pan, Er, Huang, Wang (IEEE TFS 19(5), 2011) as a native FMU: the C twin of
+ * adaptive_fuzzy_controller_fmu.py.  The math is in afc_math.c; this file only adapts
+ * it to the FMI layer.
+ *
+ * Co-simulation semantics (as the Python edition):
+ * - u, E, dE, alpha depend directly on the inputs at the same communication point;
+ * - doStep(t, h) advances theta (and w_hat for variant 3) with the inputs held at t:
+ *   theta += h dtheta(t) (explicit Euler, the sampled-data update of an embedded target);
+ * - e(0), de(0), ... of the modified error (Remark 3) are latched when initialisation ends.
+ *
+ * General form (issue 17): the order n and the number of sets m come from the parameters
+ * `order` and `sets` when the declaration table has them, else n = 2, m = 2; the rule
+ * weights are the table's theta1..thetaN (M = m^n <= N).
+ */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "afc_math.h"
+#include "fmi_layer.h"
+
+/* the internal state (STATE_ATTRIBUTES: e0, de0, ..., P, xi) */
+typedef struct {
+    double e0[MAX_ORDER]; /* e^(i)(0) latched at the end of initialisation (Remark 3) */
+    double p[MAX_ORDER][MAX_ORDER]; /* P of (30) */
+    double xi[MAX_RULES]; /* the basis (8) at the last output evaluation */
+} ControllerState;
+
+#define STATE(m) ((ControllerState *)(m)->internal)
+
+const size_t MODEL_INTERNAL_BYTES = sizeof(ControllerState);
+
+/* value references of e, de, d2e, d3e; ym, dym, ...; E, dE, ...  (those the table has) */
+static const int ERROR_VR[] = {VR_e, VR_de,
+#ifdef VR_d2e
+                               VR_d2e,
+#endif
+#ifdef VR_d3e
+                               VR_d3e,
+#endif
+};
+static const int REFERENCE_VR[] = {VR_ym, VR_dym,
+#ifdef VR_d2ym
+                                   VR_d2ym,
+#endif
+#ifdef VR_d3ym
+                                   VR_d3ym,
+#endif
+};
+static const int MODIFIED_ERROR_VR[] = {VR_E, VR_dE,
+#ifdef VR_d2E
+                                        VR_d2E,
+#endif
+#ifdef VR_d3E
+                                        VR_d3E,
+#endif
+};
+#define SUPPORTED_ORDER ((int)(sizeof ERROR_VR / sizeof ERROR_VR[0]))
+
+static int order_of(ModelInstance *m) {
+#ifdef VR_order
+    return (int)V(m, order);
+#else
+    (void)m;
+    return 2;
+#endif
+}
+
+static int sets_of(ModelInstance *m) {
+#ifdef VR_sets
+    return (int)V(m, sets);
+#else
+    (void)m;
+    return 2;
+#endif
+}
+
+static int rules_of(int n, int sets) {
+    int rules = 1;
+    for (int i = 0; i < n; i++) rules *= sets;
+    return rules;
+}
+
+void model_construct(ModelInstance *m) {
+    ControllerState *state = STATE(m);
+    int rules = rules_of(2, 2);
+    for (int j = 0; j < rules; j++) state->xi[j] = 1.0 / rules;
+}
+
+int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
+    int n = order_of(m), sets = sets_of(m);
+    int supported = SUPPORTED_ORDER;
+    if (N_k < supported) supported = N_k;
+    if (N_kappa < supported) supported = N_kappa;
+    if (N_E < supported) supported = N_E;
+    if (n < 1 || n > supported) {
+        snprintf(message, size, "parameter order = %d is invalid; valid range: 1 .. %d", n, supported);
+        return MODEL_ERROR;
+    }
+    if (sets < MIN_SETS || sets > MAX_SETS || rules_of(n, sets) > N_theta) {
+        snprintf(message, size, "parameters order = %d, sets = %d give %d rules; this FMU has %d rule "
+                 "weights theta1..theta%d", n, sets, rules_of(n, sets), N_theta, N_theta);
+        return MODEL_ERROR;
+    }
+    return MODEL_OK;
+}
+
+int model_initialize(ModelInstance *m, double start_time) {
+    (void)start_time;
+    ControllerState *state = STATE(m);
+    int n = order_of(m);
+    double k[MAX_ORDER], q[MAX_ORDER];
+    for (int i = 0; i < n; i++) {
+        k[i] = m->s->values[VRS_k[i]];
+        q[i] = m->s->values[VRS_q[i]];
+    }
+    if (lyapunov_p(n, k, q, state->p) != 0)
+        return fmu_fail(m, "the Lyapunov equation (30) has no solution for these k: "
+                        "s^n + k1 s^(n-1) + ... + kn must be Hurwitz");
+    for (int i = 0; i < n; i++) state->e0[i] = m->s->values[ERROR_VR[i]]; /* latched once (Remark 3) */
+    for (int j = 0; j < N_theta; j++) m->s->values[VRS_theta[j]] = V(m, theta0);
+    V(m, w_hat) = 0.0;
+    return MODEL_OK;
+}
+
+int model_compute_outputs(ModelInstance *m) {
+    ControllerState *state = STATE(m);
+    const double *values = m->s->values;
+    int n = order_of(m), sets = sets_of(m);
+    double e[MAX_ORDER], ym[MAX_ORDER], error[MAX_ORDER], x[MAX_ORDER], alpha[MAX_ORDER], z[MAX_ORDER];
+    double universe[MAX_ORDER];
+    for (int i = 0; i < n; i++) {
+        e[i] = values[ERROR_VR[i]];
+        ym[i] = values[REFERENCE_VR[i]];
+        universe[i] = values[VRS_E[i]];
+    }
+    modified_error(n, e, m->s->time - m->s->start_time, state->e0, V(m, lambda_e), error);
+    int fls_input = (int)V(m, fls_input);
+    fls_inputs(n, e, ym, error, fls_input, x);
+    int variant = (int)V(m, variant);
+    for (int i = 0; i < n; i++) {
+        alpha[i] = variant == VARIANT_VUD ? contraction_factor(x[i], V(m, lambda_ce), values[VRS_kappa[i]]) : 1.0;
+        z[i] = normalized_input(x[i], alpha[i], universe[i]);
+    }
+    double xi[MAX_RULES];
+    int rules = fuzzy_basis(n, sets, z, universe, V(m, mf_slope), xi);
+    double u = values[VRS_theta[0]] * xi[0]; /* [9] */
+    for (int j = 1; j < rules; j++) u += values[VRS_theta[j]] * xi[j];
+    if (variant == VARIANT_FAE) u += V(m, w_hat);
+    int finite = isfinite(u);
+    for (int i = 0; i < n; i++) finite = finite && isfinite(error[i]);
+    if (!finite) {
+        if (n == 2)
+            return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s, dE = %s from e = %s, de = %s "
+                            "(latched e(0) = %s, de(0) = %s); the inputs are out of range or the closed "
+                            "loop diverged", R(m->s->time), R(u), R(error[0]), R(error[1]), R(e[0]), R(e[1]),
+                            R(state->e0[0]), R(state->e0[1]));
+        return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s from e = %s (latched e(0) = %s); "
+                        "the inputs are out of range or the closed loop diverged",
+                        R(m->s->time), R(u), R(error[0]), R(e[0]), R(state->e0[0]));
+    }
+    V(m, u) = u;
+    for (int i = 0; i < n; i++) {
+        m->s->values[MODIFIED_ERROR_VR[i]] = error[i];
+        m->s->values[VRS_alpha[i]] = alpha[i];
+    }
+    memcpy(state->xi, xi, sizeof(double) * (size_t)rules);
+    m->outputs_stale = 0;
+    return MODEL_OK;
+}
+
+int model_step(ModelInstance *m, double current_time, double step_size) {
+    ControllerState *state = STATE(m);
+    double *values = m->s->values;
+    int n = order_of(m), rules = rules_of(n, sets_of(m));
+    double error[MAX_ORDER];
+    for (int i = 0; i < n; i++) error[i] = values[MODIFIED_ERROR_VR[i]];
+    double tau = adaptation_signal(n, error, state->p);
+    double gamma = V(m, gamma), m_theta = V(m, m_theta), delta = V(m, delta);
+    double theta[MAX_RULES];
+    int finite = 1;
+    for (int j = 0; j < rules; j++) {
+        double theta_j = values[VRS_theta[j]];
+        theta[j] = theta_j + step_size * projected_rate(theta_j, tau, state->xi[j], gamma, m_theta, delta);
+        finite = finite && isfinite(theta[j]);
+    }
+    double w_hat = V(m, w_hat);
+    if ((int)V(m, variant) == VARIANT_FAE) w_hat += step_size * V(m, gamma_w) * tau;
+    if (!(finite && isfinite(w_hat))) {
+        if (n == 2)
+            return fmu_fail(m, "adaptation diverged in doStep(t=%s, h=%s): tau = %s from E = %s, dE = %s; theta "
+                            "and w_hat keep their values at t; the inputs are out of range or the closed loop "
+                            "diverged", R(current_time), R(step_size), R(tau), R(error[0]), R(error[1]));
+        return fmu_fail(m, "adaptation diverged in doStep(t=%s, h=%s): tau = %s from E = %s; theta and w_hat "
+                        "keep their values at t; the inputs are out of range or the closed loop diverged",
+                        R(current_time), R(step_size), R(tau), R(error[0]));
+    }
+    for (int j = 0; j < rules; j++) values[VRS_theta[j]] = theta[j];
+    V(m, w_hat) = w_hat;
+    return MODEL_OK;
+}
