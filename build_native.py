@@ -223,6 +223,10 @@ def fmi3_description(fmi2_root: ET.Element) -> ET.Element:
             if typed.get(key) is not None:
                 element.set(key, typed.get(key))
         references[str(index)] = scalar.get("valueReference")
+    # FMI 3.0 requires the independent variable; it takes the value reference after the table's
+    time_reference = str(len(references))
+    ET.SubElement(variables, "Float64", name="time", valueReference=time_reference, causality="independent",
+                  variability="continuous", description="simulation time")
     structure = ET.SubElement(root, "ModelStructure")
     structure2 = fmi2_root.find("ModelStructure")
     outputs = structure2.find("Outputs")

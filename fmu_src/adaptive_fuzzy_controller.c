@@ -125,6 +125,7 @@ int model_initialize(ModelInstance *m, double start_time) {
 }
 
 int model_compute_outputs(ModelInstance *m) {
+    REPRS;
     ControllerState *state = STATE(m);
     const double *values = m->s->values;
     int n = order_of(m), sets = sets_of(m);
@@ -171,6 +172,7 @@ int model_compute_outputs(ModelInstance *m) {
 }
 
 int model_step(ModelInstance *m, double current_time, double step_size) {
+    REPRS;
     ControllerState *state = STATE(m);
     double *values = m->s->values;
     int n = order_of(m), rules = rules_of(n, sets_of(m));

@@ -151,21 +151,19 @@ const char *py_repr(double x, char *buffer) {
     return buffer;
 }
 
-const char *R(double x) {
-    static _Thread_local char buffers[8][40];
-    static _Thread_local int next;
-    next = (next + 1) % 8;
-    return py_repr(x, buffers[next]);
+const char *repr_in(Reprs *reprs, double x) {
+    char *buffer = reprs->text[reprs->used];
+    reprs->used = (reprs->used + 1) % (int)(sizeof reprs->text / sizeof reprs->text[0]);
+    return py_repr(x, buffer);
 }
 
 /* a variable's value as the Python edition prints it: int for Integer variables */
-static const char *value_repr(int vr, double value) {
+static const char *value_repr(int vr, double value, char *buffer) {
     if (MODEL_VARIABLES[vr].is_integer && isfinite(value) && value == floor(value)) {
-        static _Thread_local char buffer[40];
-        snprintf(buffer, sizeof buffer, "%.0f", value);
+        snprintf(buffer, 40, "%.0f", value);
         return buffer;
     }
-    return R(value);
+    return py_repr(value, buffer);
 }
 
 /* --------------------------------------------------------------- validation */
@@ -177,9 +175,10 @@ static int check_variable(int vr, double value, char *message, size_t size) {
     if (!bad && v->is_integer && value != floor(value)) bad = 1;
     if (!bad && v->has_minimum) bad = v->exclusive_minimum ? value <= v->minimum : value < v->minimum;
     if (!bad && v->has_maximum) bad = v->exclusive_maximum ? value >= v->maximum : value > v->maximum;
+    char text[40];
     if (bad)
         snprintf(message, size, "parameter %s = %s is invalid; valid range: %s", v->name,
-                 value_repr(vr, value), v->valid_range);
+                 value_repr(vr, value, text), v->valid_range);
     return bad;
 }
 
@@ -288,6 +287,7 @@ static int refresh_outputs(ModelInstance *m) {
 }
 
 static Status do_step(ModelInstance *m, double current_time, double step_size) {
+    REPRS;
     if (!(step_size >= 0.0)) {
         fmu_fail(m, "doStep with communication step %s; it must be >= 0", R(step_size));
         return STATUS_ERROR;
@@ -307,7 +307,11 @@ static Status do_step(ModelInstance *m, double current_time, double step_size) {
 
 /* ----------------------------------------------------------- value access */
 
+/* FMI 3.0: the independent variable time has the value reference after the table's */
+#define VR_TIME ((unsigned)N_VARIABLES)
+
 static int valid_reference(ModelInstance *m, unsigned vr, int integer, const char *call) {
+    if (FMI_VERSION == 3 && vr == VR_TIME && !integer) return 1;
     if (vr >= (unsigned)N_VARIABLES) {
         fmu_fail(m, "%s: unknown value reference %u (this FMU has 0 .. %d)", call, vr, N_VARIABLES - 1);
         return 0;
@@ -329,13 +333,14 @@ static Status get_values(ModelInstance *m, const unsigned *vr, size_t n, double 
     for (size_t i = 0; i < n; i++) {
         if (!valid_reference(m, vr[i], integer != NULL, call)) return STATUS_ERROR;
         if (integer) integer[i] = (int)values[vr[i]];
-        else real[i] = values[vr[i]];
+        else real[i] = vr[i] == VR_TIME ? m->s->time : values[vr[i]];
     }
     return STATUS_OK;
 }
 
 /* TableSlave._reject plus the fixed-parameter rule */
 static int settable(ModelInstance *m, unsigned vr, double value, const char *call) {
+    REPRS;
     const VariableInfo *v = &MODEL_VARIABLES[vr];
     if (v->causality == CAUSALITY_OUTPUT) {
         fmu_fail(m, "%s is an output and cannot be set", v->name);
@@ -368,6 +373,11 @@ static Status set_values(ModelInstance *m, const unsigned *vr, size_t n, const d
     Status status = STATUS_OK;
     for (size_t i = 0; i < n; i++) {
         if (!valid_reference(m, vr[i], integer != NULL, call)) { status = STATUS_ERROR; break; }
+        if (vr[i] == VR_TIME) {
+            fmu_fail(m, "%s: time is the independent variable and cannot be set", call);
+            status = STATUS_ERROR;
+            break;
+        }
         double value = integer ? (double)integer[i] : real[i];
         if (!settable(m, vr[i], value, call)) { status = STATUS_ERROR; break; }
         m->s->values[vr[i]] = value;

@@ -96,7 +96,15 @@ void fmu_warn(ModelInstance *m, const char *format, ...)
     ;
 /* x as Python's repr(float) writes it (shortest round trip), into buffer (>= 32 chars) */
 const char *py_repr(double x, char *buffer);
-/* several reprs in one message: a rotating set of buffers */
-const char *R(double x);
+/* several reprs in one message: declare REPRS; in the function, then R(x) gives the text
+ * of x in a buffer of its own (no static or thread-local storage: instances may run in
+ * parallel threads, and the Linux binary needs nothing but libc and libm) */
+typedef struct {
+    char text[12][40];
+    int used;
+} Reprs;
+const char *repr_in(Reprs *reprs, double x);
+#define REPRS Reprs reprs_ = {.used = 0}
+#define R(x) repr_in(&reprs_, (x))
 
 #endif

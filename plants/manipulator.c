@@ -56,6 +56,7 @@ static void manipulator_derivative(double t, double x1, double x2, double u, con
 const PlantDerivative plant_derivative = manipulator_derivative;
 
 int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
+    REPRS;
     if (!(V(m, mr1) < V(m, mr0))) {
         snprintf(message, size, "parameter mr1 = %s is invalid; valid range: 0 <= mr1 < mr0 = %s "
                  "(the payload mr(t) = mr0 + mr1 sin t must stay > 0)", R(V(m, mr1)), R(V(m, mr0)));

@@ -13,6 +13,7 @@ int model_initialize(ModelInstance *m, double start_time) {
 void model_construct(ModelInstance *m) { model_initialize(m, m->s->start_time); }
 
 int model_step(ModelInstance *m, double current_time, double step_size) {
+    REPRS;
     double params[PLANT_MAX_PARAMS];
     PlantState *state = PLANT(m);
     double x1 = state->x1, x2 = state->x2;
