@@ -339,6 +339,29 @@ def _compile(model: NativeModel, header_dir: Path, fmi_version: int, target: Tar
     return cached
 
 
+def math_library() -> Path:
+    """fmu_src/afc_math.c alone as a Linux shared library, for the tests of the C math (ctypes)."""
+    source = ROOT / "fmu_src" / "afc_math.c"
+    digest = hashlib.sha256(source.read_bytes() + (ROOT / "fmu_src" / "afc_math.h").read_bytes()
+                            + " ".join(CFLAGS).encode()).hexdigest()[:16]
+    library = WORK_DIR / "obj" / f"afc_math-{digest}.so"
+    if library.exists():
+        return library
+    library.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=library.parent) as scratch:
+        output = Path(scratch) / library.name
+        environment = dict(os.environ)
+        environment.setdefault("ZIG_GLOBAL_CACHE_DIR", str(WORK_DIR / "zig-cache"))
+        environment.setdefault("ZIG_LOCAL_CACHE_DIR", str(WORK_DIR / "zig-cache"))
+        arguments = ["cc", "-target", "x86_64-linux-gnu.2.17", "-shared", "-fPIC",
+                     *[f for f in CFLAGS if f != "-fvisibility=hidden"], "-o", str(output), str(source), "-lm"]
+        completed = subprocess.run(_zig(*arguments), capture_output=True, text=True, env=environment, cwd=scratch)
+        if completed.returncode != 0:
+            raise NativeBuildError(f"compiling {source.name} failed:\n{completed.stderr}")
+        os.replace(output, library)
+    return library
+
+
 def fat_macho(binaries: list[bytes]) -> bytes:
     """A universal (fat) Mach-O file holding the given thin binaries (what lipo -create does)."""
     alignment = 14  # 2^14: the page size of arm64 macOS

@@ -3,7 +3,11 @@
 
 #include "afc_math.h"
 
-/* [30] element-wise for n = 2 (afc_math.py lyapunov_p), a linear solve otherwise */
+/* [30]: element-wise for n = 2 (as afc_math.py on main); for other n the n (n + 1) / 2
+ * unknowns p_ij (i <= j) solve (A^T P + P A)_ij = -q_i [i = j] by Gaussian elimination
+ * with partial pivoting, built and solved in the same order as the general afc_math.py
+ * lyapunov_p of issue 17.  Element (i, j) of A^T P + P A is
+ * p_(i-1)j [i >= 1] + p_i(j-1) [j >= 1] - k_(n-i) p_(n-1)j - k_(n-j) p_i(n-1). */
 int lyapunov_p(int n, const double k[], const double q[], double p[MAX_ORDER][MAX_ORDER]) {
     if (n == 2) {
         /* A = [[0, 1], [-k2, -k1]]: -2 k2 p12 = -q1, p11 - k1 p12 - k2 p22 = 0, 2 (p12 - k1 p22) = -q2 */
@@ -13,42 +17,45 @@ int lyapunov_p(int n, const double k[], const double q[], double p[MAX_ORDER][MA
         p[0][0] = p11; p[0][1] = p12; p[1][0] = p12; p[1][1] = p22;
         return 0;
     }
-    /* companion matrix: A[i][i+1] = 1, last row -[kn, ..., k1] */
-    double a[MAX_ORDER][MAX_ORDER] = {{0}};
-    for (int i = 0; i + 1 < n; i++) a[i][i + 1] = 1.0;
-    for (int j = 0; j < n; j++) a[n - 1][j] = -k[n - 1 - j];
-    /* unknowns p_ij, i <= j; equations (A^T P + P A)_ij = -Q_ij, i <= j */
     enum { U = MAX_ORDER * (MAX_ORDER + 1) / 2 };
-    int index[MAX_ORDER][MAX_ORDER];
-    int count = 0;
+    int unknown[MAX_ORDER][MAX_ORDER];
+    int size = 0;
     for (int i = 0; i < n; i++)
-        for (int j = i; j < n; j++) index[i][j] = index[j][i] = count++;
-    double system[U][U + 1] = {{0}};
-    int row = 0;
+        for (int j = i; j < n; j++) { unknown[i][j] = unknown[j][i] = size; size++; }
+    double rows[U][U + 1];
+    int r = 0;
     for (int i = 0; i < n; i++)
-        for (int j = i; j < n; j++, row++) {
-            for (int l = 0; l < n; l++) {
-                system[row][index[l][j]] += a[l][i]; /* (A^T P)_ij = sum_l A_li P_lj */
-                system[row][index[i][l]] += a[l][j]; /* (P A)_ij = sum_l P_il A_lj */
+        for (int j = i; j < n; j++, r++) {
+            for (int c = 0; c <= size; c++) rows[r][c] = 0.0;
+            if (i >= 1) rows[r][unknown[i - 1][j]] += 1.0;
+            if (j >= 1) rows[r][unknown[i][j - 1]] += 1.0;
+            rows[r][unknown[n - 1][j]] -= k[n - 1 - i]; /* A[n-1][i] = -k_(n-i) */
+            rows[r][unknown[i][n - 1]] -= k[n - 1 - j];
+            rows[r][size] = i == j ? -q[i] : 0.0;
+        }
+    for (int column = 0; column < size; column++) { /* forward elimination, first largest pivot */
+        int pivot = column;
+        for (int s = column + 1; s < size; s++)
+            if (fabs(rows[s][column]) > fabs(rows[pivot][column])) pivot = s;
+        if (rows[pivot][column] == 0.0) return -1; /* singular: k is not Hurwitz */
+        if (pivot != column)
+            for (int c = 0; c <= size; c++) {
+                double swap = rows[column][c]; rows[column][c] = rows[pivot][c]; rows[pivot][c] = swap;
             }
-            system[row][count] = i == j ? -q[i] : 0.0;
-        }
-    for (int c = 0; c < count; c++) { /* Gaussian elimination with partial pivoting */
-        int pivot = c;
-        for (int r = c + 1; r < count; r++)
-            if (fabs(system[r][c]) > fabs(system[pivot][c])) pivot = r;
-        if (system[pivot][c] == 0.0) return -1;
-        for (int j = 0; j <= count; j++) {
-            double swap = system[c][j]; system[c][j] = system[pivot][j]; system[pivot][j] = swap;
-        }
-        for (int r = 0; r < count; r++) {
-            if (r == c) continue;
-            double factor = system[r][c] / system[c][c];
-            for (int j = c; j <= count; j++) system[r][j] -= factor * system[c][j];
+        for (int s = column + 1; s < size; s++) {
+            double factor = rows[s][column] / rows[column][column];
+            if (factor != 0.0)
+                for (int c = column; c <= size; c++) rows[s][c] -= factor * rows[column][c];
         }
     }
+    double x[U];
+    for (int s = size - 1; s >= 0; s--) { /* back substitution */
+        double total = rows[s][size];
+        for (int c = s + 1; c < size; c++) total -= rows[s][c] * x[c];
+        x[s] = total / rows[s][s];
+    }
     for (int i = 0; i < n; i++)
-        for (int j = 0; j < n; j++) p[i][j] = system[index[i][j]][count] / system[index[i][j]][index[i][j]];
+        for (int j = 0; j < n; j++) p[i][j] = x[unknown[i][j]];
     return 0;
 }
 
@@ -101,48 +108,33 @@ int fuzzy_basis(int n, int sets, const double z[], const double universe[], doub
     return rules;
 }
 
+/* Remark 3 [36]: a_k = sum_(j <= k) e^(j)(0) / j! * lambda_e^(k-j) / (k-j)!  (remark3_coefficients),
+ * p^(j)(t) by Horner (remark3_polynomials), and the derivatives of p(t) exp(-lambda_e t) by
+ * r_0 = p, r_i = r_(i-1)' - lambda_e r_(i-1) (remark3_offset); n = 2: a0 = e(0),
+ * a1 = de(0) + lambda_e e(0), offsets (a0 + a1 t) e^(-lambda_e t), (a1 - lambda_e (a0 + a1 t)) e^(-lambda_e t) */
 void modified_error(int n, const double e[], double t, const double e0[], double lambda_e, double error[]) {
+    static const double factorial[MAX_ORDER] = {1.0, 1.0, 2.0, 6.0};
     if (lambda_e == 0.0) {
         for (int i = 0; i < n; i++) error[i] = e[i];
         return;
     }
-    /* d^i p(0) from E^(i)(0) = 0: d^i p(0) = e^(i)(0) - sum_{k<i} C(i,k) d^k p(0) (-lambda_e)^(i-k)
-     * (n = 2: a0 = e(0), a1 = de(0) + lambda_e e(0)) */
-    double derivative0[MAX_ORDER], a[MAX_ORDER];
-    static const double binomial[MAX_ORDER][MAX_ORDER] = {{1}, {1, 1}, {1, 2, 1}, {1, 3, 3, 1}};
-    static const double factorial[MAX_ORDER] = {1, 1, 2, 6};
-    for (int i = 0; i < n; i++) {
-        double value = e0[i];
-        for (int k = i - 1; k >= 0; k--) {
-            double power = 1.0;
-            for (int r = 0; r < i - k; r++) power *= lambda_e;
-            double term = binomial[i][k] * derivative0[k] * power;
-            value = (i - k) % 2 ? value + term : value - term;
-        }
-        derivative0[i] = value;
-        a[i] = value / factorial[i]; /* p(t) = a0 + a1 t + ... */
+    double a[MAX_ORDER];
+    for (int k = 0; k < n; k++) {
+        double total = 0.0;
+        for (int j = 0; j <= k; j++)
+            total += e0[j] / factorial[j] * (pow(lambda_e, (double)(k - j)) / factorial[k - j]);
+        a[k] = total;
+    }
+    double values[MAX_ORDER]; /* p^(j)(t) */
+    for (int j = 0; j < n; j++) {
+        double acc = 0.0;
+        for (int k = n - 1; k >= j; k--) acc = acc * t + a[k] * (factorial[k] / factorial[k - j]);
+        values[j] = acc;
     }
     double decay = exp(-lambda_e * t);
-    /* d^k p(t), Horner */
-    double pk[MAX_ORDER];
-    for (int k = 0; k < n; k++) {
-        double value = 0.0;
-        for (int j = n - 1; j >= k; j--) {
-            double coefficient = a[j] * (factorial[j] / factorial[j - k]);
-            value = j == n - 1 ? coefficient : coefficient + value * t;
-        }
-        pk[k] = value;
-    }
-    /* E^(i) = e^(i) - d^i[p(t) exp(-l t)] = e^(i) - exp(-l t) sum_k C(i,k) p^(k)(t) (-l)^(i-k) */
     for (int i = 0; i < n; i++) {
-        double sum = pk[i];
-        for (int k = i - 1; k >= 0; k--) {
-            double power = 1.0;
-            for (int r = 0; r < i - k; r++) power *= lambda_e;
-            double term = binomial[i][k] * power * pk[k];
-            sum = (i - k) % 2 ? sum - term : sum + term;
-        }
-        error[i] = e[i] - sum * decay;
+        error[i] = e[i] - values[0] * decay;
+        for (int j = 0; j + 1 < n - i; j++) values[j] = values[j + 1] - lambda_e * values[j];
     }
 }
 

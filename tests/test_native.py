@@ -327,21 +327,28 @@ def test_native_fmu_state_get_set_and_serialize_are_exact(native):
     try:
         trace, saved = _drive_controller(driven, steps=200, state_at=100)
         blob = driven.slave.serializeFMUstate(saved)
-        driven.slave.setFMUstate(driven.slave.deSerializeFMUstate(blob))
+    finally:
+        driven.free()
+    # a second instance, initialised differently (other k, e(0), de(0)), continues from the state
+    other = Driven(native["AdaptiveFuzzyController"][2])
+    try:
+        other.initialize(e=-0.7, de=0.4, k1=5.0, q2=1.0)
+        other.slave.doStep(0.0, 1e-3)
+        other.slave.setFMUstate(other.slave.deSerializeFMUstate(blob))
         again = []
         for i in range(100, 200):
             t = i * 1e-3
-            driven.set(e=0.3 * math.cos(3 * t), de=-0.9 * math.sin(3 * t), ym=0.2 * math.sin(t),
-                       dym=0.2 * math.cos(t))
-            again.append(driven.get("u", "E", "dE", "alpha1", "alpha2", "theta1", "theta2", "theta3", "theta4"))
-            driven.slave.doStep(t, 1e-3)
+            other.set(e=0.3 * math.cos(3 * t), de=-0.9 * math.sin(3 * t), ym=0.2 * math.sin(t),
+                      dym=0.2 * math.cos(t))
+            again.append(other.get("u", "E", "dE", "alpha1", "alpha2", "theta1", "theta2", "theta3", "theta4"))
+            other.slave.doStep(t, 1e-3)
         assert again == trace[100:]
-        driven.messages.clear()
+        other.messages.clear()
         with pytest.raises(FMICallException):
-            driven.slave.deSerializeFMUstate(blob[:-1])
-        assert any("deSerializeFMUState" in m for _, m in driven.messages)
+            other.slave.deSerializeFMUstate(blob[:-1])
+        assert any("deSerializeFMUState" in m for _, m in other.messages)
     finally:
-        driven.free()
+        other.free()
 
 
 def test_native_life_cycle_rules(native):
