@@ -88,21 +88,48 @@ void model_construct(ModelInstance *m) {
     for (int j = 0; j < rules; j++) state->xi[j] = 1.0 / rules;
 }
 
+/* cross_parameter_errors: the rule count within the table's rule weights and, for the
+ * general controller, k Hurwitz (a positive definite P of (30)) */
 int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
     int n = order_of(m), sets = sets_of(m);
-    int supported = SUPPORTED_ORDER;
-    if (N_k < supported) supported = N_k;
-    if (N_kappa < supported) supported = N_kappa;
-    if (N_E < supported) supported = N_E;
-    if (n < 1 || n > supported) {
-        snprintf(message, size, "parameter order = %d is invalid; valid range: 1 .. %d", n, supported);
+    if (n < 1 || n > SUPPORTED_ORDER || N_k < n || N_q < n || N_kappa < n || N_E < n) {
+        snprintf(message, size, "parameter order = %d is invalid; valid range: 1 .. %d", n, SUPPORTED_ORDER);
         return MODEL_ERROR;
     }
-    if (sets < MIN_SETS || sets > MAX_SETS || rules_of(n, sets) > N_theta) {
-        snprintf(message, size, "parameters order = %d, sets = %d give %d rules; this FMU has %d rule "
-                 "weights theta1..theta%d", n, sets, rules_of(n, sets), N_theta, N_theta);
+    if (rules_of(n, sets) > N_theta) {
+        snprintf(message, size, "parameters order = %d, sets = %d give m^n = %d rules, above the bound %d; "
+                 "valid: sets^order <= %d (every sets 2..5 up to order 3, sets <= 3 at order 4)",
+                 n, sets, rules_of(n, sets), N_theta, N_theta);
         return MODEL_ERROR;
     }
+#ifdef VR_order
+    double k[MAX_ORDER], q[MAX_ORDER], p[MAX_ORDER][MAX_ORDER];
+    for (int i = 0; i < n; i++) {
+        k[i] = m->s->values[VRS_k[i]];
+        q[i] = m->s->values[VRS_q[i]];
+    }
+    if (lyapunov_p(n, k, q, p) != 0 || !is_positive_definite(n, (const double (*)[MAX_ORDER])p)) {
+        /* as Python prints them: k as a tuple, the polynomial s^n + k1 s^(n-1) + ... + kn */
+        char tuple[256] = "(", polynomial[512];
+        size_t used = 1;
+        int written = snprintf(polynomial, sizeof polynomial, "s^%d", n);
+        for (int i = 0; i < n; i++) {
+            char text[40];
+            py_repr(k[i], text);
+            used += (size_t)snprintf(tuple + used, sizeof tuple - used, "%s%s", i ? ", " : "", text);
+            if (n - 1 - i)
+                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %s s^%d", text,
+                                    n - 1 - i);
+            else
+                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %s", text);
+        }
+        snprintf(tuple + used, sizeof tuple - used, n == 1 ? ",)" : ")");
+        snprintf(message, size, "parameters k1..k%d = %s are invalid for order = %d: %s is not Hurwitz (no "
+                 "positive definite P in (30)); valid: k with every root of the polynomial in the left "
+                 "half-plane, e.g. the coefficients of (s + 1)^%d", n, tuple, n, polynomial, n);
+        return MODEL_ERROR;
+    }
+#endif
     return MODEL_OK;
 }
 
@@ -119,7 +146,8 @@ int model_initialize(ModelInstance *m, double start_time) {
         return fmu_fail(m, "the Lyapunov equation (30) has no solution for these k: "
                         "s^n + k1 s^(n-1) + ... + kn must be Hurwitz");
     for (int i = 0; i < n; i++) state->e0[i] = m->s->values[ERROR_VR[i]]; /* latched once (Remark 3) */
-    for (int j = 0; j < N_theta; j++) m->s->values[VRS_theta[j]] = V(m, theta0);
+    int rules = rules_of(n, sets_of(m));
+    for (int j = 0; j < N_theta; j++) m->s->values[VRS_theta[j]] = j < rules ? V(m, theta0) : 0.0;
     V(m, w_hat) = 0.0;
     return MODEL_OK;
 }

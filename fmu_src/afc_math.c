@@ -3,20 +3,13 @@
 
 #include "afc_math.h"
 
-/* [30]: element-wise for n = 2 (as afc_math.py on main); for other n the n (n + 1) / 2
- * unknowns p_ij (i <= j) solve (A^T P + P A)_ij = -q_i [i = j] by Gaussian elimination
- * with partial pivoting, built and solved in the same order as the general afc_math.py
- * lyapunov_p of issue 17.  Element (i, j) of A^T P + P A is
+/* [30]: the n (n + 1) / 2 unknowns p_ij (i <= j) solve (A^T P + P A)_ij = -q_i [i = j] by
+ * Gaussian elimination with partial pivoting, built and solved in the same order as the
+ * general afc_math.py lyapunov_p of issue 17 (for n = 2 it can differ in the last bit from
+ * the element-wise formulas p12 = q1 / (2 k2), p22 = (p12 + q2 / 2) / k1, p11 = k1 p12 + k2 p22,
+ * for the default k, q it does not).  Element (i, j) of A^T P + P A is
  * p_(i-1)j [i >= 1] + p_i(j-1) [j >= 1] - k_(n-i) p_(n-1)j - k_(n-j) p_i(n-1). */
 int lyapunov_p(int n, const double k[], const double q[], double p[MAX_ORDER][MAX_ORDER]) {
-    if (n == 2) {
-        /* A = [[0, 1], [-k2, -k1]]: -2 k2 p12 = -q1, p11 - k1 p12 - k2 p22 = 0, 2 (p12 - k1 p22) = -q2 */
-        double p12 = q[0] / (2.0 * k[1]);
-        double p22 = (p12 + 0.5 * q[1]) / k[0];
-        double p11 = k[0] * p12 + k[1] * p22;
-        p[0][0] = p11; p[0][1] = p12; p[1][0] = p12; p[1][1] = p22;
-        return 0;
-    }
     enum { U = MAX_ORDER * (MAX_ORDER + 1) / 2 };
     int unknown[MAX_ORDER][MAX_ORDER];
     int size = 0;
@@ -57,6 +50,23 @@ int lyapunov_p(int n, const double k[], const double q[], double p[MAX_ORDER][MA
     for (int i = 0; i < n; i++)
         for (int j = 0; j < n; j++) p[i][j] = x[unknown[i][j]];
     return 0;
+}
+
+int is_positive_definite(int n, const double matrix[MAX_ORDER][MAX_ORDER]) {
+    double lower[MAX_ORDER][MAX_ORDER] = {{0}};
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j <= i; j++) {
+            double sum = 0.0;
+            for (int c = 0; c < j; c++) sum += lower[i][c] * lower[j][c];
+            double total = matrix[i][j] - sum;
+            if (i == j) {
+                if (!(total > 0.0)) return 0;
+                lower[i][i] = sqrt(total);
+            } else {
+                lower[i][j] = total / lower[j][j];
+            }
+        }
+    return 1;
 }
 
 double contraction_factor(double x, double lambda_ce, double kappa) {

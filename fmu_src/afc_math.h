@@ -21,6 +21,9 @@
  * and Q = diag(q1..qn); returns 0, or -1 if the system is singular (A not Hurwitz). */
 int lyapunov_p(int n, const double k[], const double q[], double p[MAX_ORDER][MAX_ORDER]);
 
+/* 1 when the symmetric n x n matrix is positive definite (Cholesky), else 0 */
+int is_positive_definite(int n, const double matrix[MAX_ORDER][MAX_ORDER]);
+
 /* alpha(x) = 1 - lambda_ce exp(-kappa x^2)  [23] */
 double contraction_factor(double x, double lambda_ce, double kappa);
 
