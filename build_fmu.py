@@ -91,21 +91,24 @@ EDITION_VARIABLE = "AFC_EDITION"
 
 def selected_edition() -> str:
     edition = os.environ.get(EDITION_VARIABLE, "python") or "python"
-    if edition not in ("python", "native"):
-        raise SystemExit(f"error: {EDITION_VARIABLE}={edition!r} is invalid; valid: python, native")
+    if edition not in ("python", "native", "native3"):
+        raise SystemExit(f"error: {EDITION_VARIABLE}={edition!r} is invalid; valid: python, native, native3")
     return edition
 
 
 def ensure_built(force: bool = False, verbose: bool = False, edition: str | None = None) -> dict[str, Path]:
     """Build missing or stale FMUs; return {model identifier: path}.
 
-    ``edition``: "python" (pythonfmu, build/fmus/) or "native" (C, FMI 2.0,
-    build/fmus/native/); default: $AFC_EDITION, else "python".
+    ``edition``: "python" (pythonfmu, build/fmus/), "native" (C, FMI 2.0,
+    build/fmus/native/) or "native3" (C, FMI 3.0, build/fmus/native/fmi3/);
+    default: $AFC_EDITION, else "python".
     """
     edition = edition or selected_edition()
-    if edition == "native":
+    if edition in ("native", "native3"):
         import build_native
-        return {name: paths[2] for name, paths in build_native.ensure_built(force=force, verbose=verbose).items()}
+        version = 3 if edition == "native3" else 2
+        return {name: paths[version]
+                for name, paths in build_native.ensure_built(force=force, verbose=verbose).items()}
     paths = {}
     for fmu in FMUS:
         if force or is_stale(fmu):

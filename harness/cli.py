@@ -90,9 +90,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def add_edition_argument(parser: argparse.ArgumentParser) -> None:
     """``--edition``: which FMUs the command runs (one option, shared by every command)."""
-    parser.add_argument("--edition", choices=("python", "native"), default=None,
-                        help="python: the pythonfmu FMUs (reference edition, default); native: the C FMUs "
-                             "(FMI 2.0, docs/native.md); default: $AFC_EDITION, else python")
+    parser.add_argument("--edition", choices=("python", "native", "native3"), default=None,
+                        help="python: the pythonfmu FMUs (reference edition); native: the C FMUs, FMI 2.0; "
+                             "native3: the C FMUs, FMI 3.0 (our master only; docs/native.md); "
+                             "default: $AFC_EDITION, else python")
 
 
 def apply_edition(args):
