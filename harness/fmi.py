@@ -191,19 +191,24 @@ class Component:
         values = (fmi2Real * count)()
         return references, values, count
 
+    def _bound_array_call(self, function, names) -> tuple:
+        """(values array, call): ``function(instance, references, count, values[, count])`` with every
+        argument prepared once as a ctypes object and no per-call argument conversion (a C
+        function pointer without argtypes: 0.4 us per call instead of 0.9 us through fmpy's)."""
+        references, values, count = self.real_buffer(names)
+        bare = ctypes.CFUNCTYPE(ctypes.c_int)(ctypes.cast(function, ctypes.c_void_p).value)
+        arguments = [ctypes.c_void_p(self._component), references, ctypes.c_size_t(count), values]
+        if self.fmi3:
+            arguments.append(ctypes.c_size_t(count))
+        return values, functools.partial(bare, *arguments)
+
     def real_reader(self, names) -> tuple:
         """(values array, call) where call() reads ``names`` into values and returns the status."""
-        references, values, count = self.real_buffer(names)
-        if self.fmi3:
-            return values, functools.partial(self._raw_get_real, self._component, references, count, values, count)
-        return values, functools.partial(self._raw_get_real, self._component, references, count, values)
+        return self._bound_array_call(self._raw_get_real, names)
 
     def real_writer(self, names) -> tuple:
         """(values array, call) where call() writes values to ``names`` and returns the status."""
-        references, values, count = self.real_buffer(names)
-        if self.fmi3:
-            return values, functools.partial(self._raw_set_real, self._component, references, count, values, count)
-        return values, functools.partial(self._raw_set_real, self._component, references, count, values)
+        return self._bound_array_call(self._raw_set_real, names)
 
     def stepper(self):
         """call(time, step, 1) -> status: fmi2DoStep (or fmi3DoStep) bound to this instance."""
