@@ -69,8 +69,10 @@ class NativeModel:
 
 MODELS = (
     NativeModel("AdaptiveFuzzyController",
-                (ROOT / "fmu_src" / "adaptive_fuzzy_controller.c", ROOT / "fmu_src" / "afc_math.c"),
-                (ROOT / "fmu_src" / "afc_math.h",)),
+                (ROOT / "fmu_src" / "adaptive_fuzzy_controller.c", ROOT / "fmu_src" / "afc_math.c",
+                 ROOT / "fmu_src" / "initial_error_latch.c", ROOT / "fmu_src" / "chatter_monitor.c"),
+                (ROOT / "fmu_src" / "afc_math.h", ROOT / "fmu_src" / "initial_error_latch.h",
+                 ROOT / "fmu_src" / "chatter_monitor.h")),
     NativeModel("InvertedPendulum",
                 (ROOT / "plants" / "inverted_pendulum.c", ROOT / "plants" / "rk4_plant_slave.c",
                  ROOT / "plants" / "plant_integration.c"),

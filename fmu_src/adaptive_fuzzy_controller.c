@@ -18,13 +18,27 @@
 #include <string.h>
 
 #include "afc_math.h"
+#include "chatter_monitor.h"
 #include "fmi_layer.h"
+#include "initial_error_latch.h"
 
-/* the internal state (STATE_ATTRIBUTES: e0, de0, ..., P, xi) */
+/* Host robustness (issue 13): with the table's parameter initial_error, e(0), de(0), ... and the
+ * time origin of the modified error come from initial_error_latch (checked over the first
+ * doSteps, or pinned by e0, de0, ...), and chatter_monitor watches u; without it, e(0), de(0)
+ * are the inputs at the end of initialisation, for good. */
+#ifdef VR_initial_error
+#define HOST_ROBUST 1
+#define INITIAL_ERROR_PINNED 2
+#else
+#define HOST_ROBUST 0
+#endif
+
+/* the internal state (STATE_ATTRIBUTES: latch, chatter, P, xi) */
 typedef struct {
-    double e0[MAX_ORDER]; /* e^(i)(0) latched at the end of initialisation (Remark 3) */
+    InitialErrorLatch latch;        /* x(t0) = e(0), de(0), ... and t0 (Remark 3) */
+    ChatterMonitor chatter;         /* chatter statistic of u */
     double p[MAX_ORDER][MAX_ORDER]; /* P of (30) */
-    double xi[MAX_RULES]; /* the basis (8) at the last output evaluation */
+    double xi[MAX_RULES];           /* the basis (8) at the last output evaluation */
 } ControllerState;
 
 #define STATE(m) ((ControllerState *)(m)->internal)
@@ -57,6 +71,17 @@ static const int MODIFIED_ERROR_VR[] = {VR_E, VR_dE,
 #endif
 };
 #define SUPPORTED_ORDER ((int)(sizeof ERROR_VR / sizeof ERROR_VR[0]))
+static const char *const ERROR_NAMES[] = {"e", "de", "d2e", "d3e"};
+#if HOST_ROBUST
+static const int PINNED_ERROR_VR[] = {VR_e0, VR_de0,
+#ifdef VR_d2e0
+                                      VR_d2e0,
+#endif
+#ifdef VR_d3e0
+                                      VR_d3e0,
+#endif
+};
+#endif
 
 static int order_of(ModelInstance *m) {
 #ifdef VR_order
@@ -133,22 +158,37 @@ int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
     return MODEL_OK;
 }
 
+static void restart_adaptation(ModelInstance *m) {
+    int rules = rules_of(order_of(m), sets_of(m));
+    for (int j = 0; j < N_theta; j++) m->s->values[VRS_theta[j]] = j < rules ? V(m, theta0) : 0.0;
+    V(m, w_hat) = 0.0;
+}
+
 int model_initialize(ModelInstance *m, double start_time) {
-    (void)start_time;
     ControllerState *state = STATE(m);
     int n = order_of(m);
-    double k[MAX_ORDER], q[MAX_ORDER];
+    double k[MAX_ORDER], q[MAX_ORDER], sample[MAX_ORDER];
     for (int i = 0; i < n; i++) {
         k[i] = m->s->values[VRS_k[i]];
         q[i] = m->s->values[VRS_q[i]];
+        sample[i] = m->s->values[ERROR_VR[i]];
     }
     if (lyapunov_p(n, k, q, state->p) != 0)
         return fmu_fail(m, "the Lyapunov equation (30) has no solution for these k: "
                         "s^n + k1 s^(n-1) + ... + kn must be Hurwitz");
-    for (int i = 0; i < n; i++) state->e0[i] = m->s->values[ERROR_VR[i]]; /* latched once (Remark 3) */
-    int rules = rules_of(n, sets_of(m));
-    for (int j = 0; j < N_theta; j++) m->s->values[VRS_theta[j]] = j < rules ? V(m, theta0) : 0.0;
-    V(m, w_hat) = 0.0;
+#if HOST_ROBUST
+    if ((int)V(m, initial_error) == INITIAL_ERROR_PINNED) {
+        double pinned[MAX_ORDER];
+        for (int i = 0; i < n; i++) pinned[i] = m->s->values[PINNED_ERROR_VR[i]];
+        latch_pin(&state->latch, n, start_time, pinned);
+    } else { /* tentative: checked over the first doSteps (Remark 3, initial_error_latch) */
+        latch_start(&state->latch, n, start_time, sample);
+    }
+    chatter_start(&state->chatter);
+#else
+    latch_pin(&state->latch, n, start_time, sample); /* latched once (Remark 3) */
+#endif
+    restart_adaptation(m);
     return MODEL_OK;
 }
 
@@ -164,7 +204,7 @@ int model_compute_outputs(ModelInstance *m) {
         ym[i] = values[REFERENCE_VR[i]];
         universe[i] = values[VRS_E[i]];
     }
-    modified_error(n, e, m->s->time - m->s->start_time, state->e0, V(m, lambda_e), error);
+    modified_error(n, e, m->s->time - state->latch.origin, state->latch.latched, V(m, lambda_e), error);
     int fls_input = (int)V(m, fls_input);
     fls_inputs(n, e, ym, error, fls_input, x);
     int variant = (int)V(m, variant);
@@ -180,14 +220,19 @@ int model_compute_outputs(ModelInstance *m) {
     int finite = isfinite(u);
     for (int i = 0; i < n; i++) finite = finite && isfinite(error[i]);
     if (!finite) {
+        if (n == 2 && HOST_ROBUST)
+            return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s, dE = %s from e = %s, de = %s "
+                            "(latched e(0), de(0) = [%s, %s]); the inputs are out of range or the closed "
+                            "loop diverged", R(m->s->time), R(u), R(error[0]), R(error[1]), R(e[0]), R(e[1]),
+                            R(state->latch.latched[0]), R(state->latch.latched[1]));
         if (n == 2)
             return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s, dE = %s from e = %s, de = %s "
                             "(latched e(0) = %s, de(0) = %s); the inputs are out of range or the closed "
                             "loop diverged", R(m->s->time), R(u), R(error[0]), R(error[1]), R(e[0]), R(e[1]),
-                            R(state->e0[0]), R(state->e0[1]));
+                            R(state->latch.latched[0]), R(state->latch.latched[1]));
         return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s from e = %s (latched e(0) = %s); "
                         "the inputs are out of range or the closed loop diverged",
-                        R(m->s->time), R(u), R(error[0]), R(e[0]), R(state->e0[0]));
+                        R(m->s->time), R(u), R(error[0]), R(e[0]), R(state->latch.latched[0]));
     }
     V(m, u) = u;
     for (int i = 0; i < n; i++) {
@@ -199,9 +244,32 @@ int model_compute_outputs(ModelInstance *m) {
     return MODEL_OK;
 }
 
+#if HOST_ROBUST
+/* let the latch rule see this doStep's inputs; restart on a re-latch, warn once */
+static int watch_initial_error(ModelInstance *m, double time) {
+    ControllerState *state = STATE(m);
+    double sample[MAX_ORDER];
+    int n = (int)state->latch.order;
+    for (int i = 0; i < n; i++) sample[i] = m->s->values[ERROR_VR[i]];
+    int events = latch_observe(&state->latch, time, sample);
+    if (events & LATCH_RELATCHED) {
+        restart_adaptation(m);
+        if (model_compute_outputs(m) != MODEL_OK) return MODEL_ERROR; /* E, dE, xi from the new latch */
+    }
+    if (events & LATCH_DECIDED) {
+        char message[2048];
+        if (latch_warning(&state->latch, ERROR_NAMES, message, sizeof message)) fmu_warn(m, "%s", message);
+    }
+    return MODEL_OK;
+}
+#endif
+
 int model_step(ModelInstance *m, double current_time, double step_size) {
     REPRS;
     ControllerState *state = STATE(m);
+#if HOST_ROBUST
+    if (state->latch.open != 0.0 && watch_initial_error(m, current_time) != MODEL_OK) return MODEL_ERROR;
+#endif
     double *values = m->s->values;
     int n = order_of(m), rules = rules_of(n, sets_of(m));
     double error[MAX_ORDER];
@@ -228,5 +296,14 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     }
     for (int j = 0; j < rules; j++) values[VRS_theta[j]] = theta[j];
     V(m, w_hat) = w_hat;
+#if HOST_ROBUST
+    if (chatter_update(&state->chatter, V(m, u), step_size)) {
+        char message[2048];
+        chatter_warning(&state->chatter, step_size, message, sizeof message);
+        fmu_warn(m, "%s", message);
+    }
+#else
+    (void)ERROR_NAMES;
+#endif
     return MODEL_OK;
 }
