@@ -342,9 +342,10 @@ def _compile(model: NativeModel, header_dir: Path, fmi_version: int, target: Tar
 
 
 def math_library() -> Path:
-    """fmu_src/afc_math.c alone as a Linux shared library, for the tests of the C math (ctypes)."""
-    source = ROOT / "fmu_src" / "afc_math.c"
-    digest = hashlib.sha256(source.read_bytes() + (ROOT / "fmu_src" / "afc_math.h").read_bytes()
+    """The controller's pure C modules (afc_math, initial_error_latch, chatter_monitor) as one
+    Linux shared library, for their tests through ctypes."""
+    sources = [ROOT / "fmu_src" / f"{name}.c" for name in ("afc_math", "initial_error_latch", "chatter_monitor")]
+    digest = hashlib.sha256(b"".join(p.read_bytes() + p.with_suffix(".h").read_bytes() for p in sources)
                             + " ".join(CFLAGS).encode()).hexdigest()[:16]
     library = WORK_DIR / "obj" / f"afc_math-{digest}.so"
     if library.exists():
@@ -356,10 +357,10 @@ def math_library() -> Path:
         environment.setdefault("ZIG_GLOBAL_CACHE_DIR", str(WORK_DIR / "zig-cache"))
         environment.setdefault("ZIG_LOCAL_CACHE_DIR", str(WORK_DIR / "zig-cache"))
         arguments = ["cc", "-target", "x86_64-linux-gnu.2.17", "-shared", "-fPIC",
-                     *[f for f in CFLAGS if f != "-fvisibility=hidden"], "-o", str(output), str(source), "-lm"]
+                     *[f for f in CFLAGS if f != "-fvisibility=hidden"], "-o", str(output), *map(str, sources), "-lm"]
         completed = subprocess.run(_zig(*arguments), capture_output=True, text=True, env=environment, cwd=scratch)
         if completed.returncode != 0:
-            raise NativeBuildError(f"compiling {source.name} failed:\n{completed.stderr}")
+            raise NativeBuildError(f"compiling the controller's C modules failed:\n{completed.stderr}")
         os.replace(output, library)
     return library
 

@@ -147,3 +147,74 @@ def test_tau_is_the_last_column_of_p_times_e(afc):
             matrix[i][j] = p[i, j]
     error = [0.3, -0.2, 0.1]
     assert afc.adaptation_signal(3, vector(error), ctypes.byref(matrix)) == pytest.approx(float(np.dot(error, p[:, 2])))
+
+
+# ------------------------------------------- host robustness (issue 13) in C
+class Latch(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_double) for name in
+                ("open", "origin", "previous_time", "rejected_time", "relatches", "confirmed")] + [
+        ("latched", ctypes.c_double * MAX_ORDER), ("previous", ctypes.c_double * MAX_ORDER),
+        ("rejected", ctypes.c_double * MAX_ORDER), ("order", ctypes.c_double)]
+
+
+class Chatter(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_double) for name in
+                ("previous_u", "variation_rate", "magnitude", "elapsed", "samples", "warned")]
+
+
+RELATCHED, DECIDED = 1, 2
+
+
+def test_the_latch_keeps_a_consistent_start_and_decides_on_the_first_informative_pair(afc):
+    latch = Latch()
+    afc.latch_start(ctypes.byref(latch), 2, ctypes.c_double(0.0), vector([0.3, 0.0]))
+    h = 1e-3
+    # e(t) = 0.3 cos 3t, de = -0.9 sin 3t: the same-time sample at t = 0 agrees, then a consistent pair
+    assert afc.latch_observe(ctypes.byref(latch), ctypes.c_double(0.0), vector([0.3, -0.0])) == 0
+    events = afc.latch_observe(ctypes.byref(latch), ctypes.c_double(h),
+                               vector([0.3 * math.cos(3 * h), -0.9 * math.sin(3 * h)]))
+    assert events == DECIDED and latch.open == 0.0 and latch.relatches == 0.0
+    assert list(latch.latched[:2]) == [0.3, 0.0] and latch.origin == 0.0
+    message = ctypes.create_string_buffer(2048)
+    assert afc.latch_warning(ctypes.byref(latch), (ctypes.c_char_p * 4)(b"e", b"de", b"d2e", b"d3e"),
+                             message, 2048) == 0
+
+
+def test_the_latch_rejects_placeholders_and_warns_with_values_and_times(afc):
+    latch = Latch()
+    afc.latch_start(ctypes.byref(latch), 2, ctypes.c_double(0.0), vector([0.0, 0.0]))  # placeholders
+    true = lambda t: [0.3 * math.cos(3 * t), -0.9 * math.sin(3 * t)]  # noqa: E731
+    h, events = 1e-3, 0
+    assert afc.latch_observe(ctypes.byref(latch), ctypes.c_double(0.0), vector(true(0.0))) == RELATCHED
+    events = afc.latch_observe(ctypes.byref(latch), ctypes.c_double(h), vector(true(h)))
+    assert events == DECIDED and latch.origin == 0.0 and list(latch.latched[:2]) == true(0.0)
+    message = ctypes.create_string_buffer(2048)
+    assert afc.latch_warning(ctypes.byref(latch), (ctypes.c_char_p * 4)(b"e", b"de", b"d2e", b"d3e"),
+                             message, 2048) == 1
+    assert message.value.decode().startswith(
+        "initial error re-latched: rejected e = 0, de = 0 at t = 0 as placeholders (the host did not propagate "
+        "initial values); kept e = 0.3, de = -0 at t = 0 as e(0)")
+
+
+def test_a_pinned_latch_never_moves(afc):
+    latch = Latch()
+    afc.latch_pin(ctypes.byref(latch), 2, ctypes.c_double(0.0), vector([0.1, 0.2]))
+    assert afc.latch_observe(ctypes.byref(latch), ctypes.c_double(0.0), vector([5.0, 5.0])) == 0
+    assert list(latch.latched[:2]) == [0.1, 0.2]
+
+
+def test_the_chatter_monitor_warns_once_on_a_zig_zag_u_and_never_on_a_smooth_one(afc):
+    afc.chatter_update.restype = ctypes.c_int
+    afc.chatter_frequency.restype = ctypes.c_double
+    h = 4e-4
+    for zig_zag, expected in ((False, 0), (True, 1)):
+        state = Chatter()
+        afc.chatter_start(ctypes.byref(state))
+        warnings = 0
+        for k in range(int(3.0 / h)):
+            u = 5.0 * math.sin(k * h) + (3.0 * (-1) ** k if zig_zag else 0.0)
+            warnings += afc.chatter_update(ctypes.byref(state), ctypes.c_double(u), ctypes.c_double(h))
+        assert warnings == expected
+    message = ctypes.create_string_buffer(2048)
+    afc.chatter_warning(ctypes.byref(state), ctypes.c_double(h), message, 2048)
+    assert message.value.decode().startswith("u chatters with communication step 0.0004 s: over the last ~1 s")
