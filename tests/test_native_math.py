@@ -181,19 +181,22 @@ def test_the_latch_keeps_a_consistent_start_and_decides_on_the_first_informative
 
 
 def test_the_latch_rejects_placeholders_and_warns_with_values_and_times(afc):
+    """A Jacobi host without propagation: placeholders at init and at the first doStep, the
+    true values from the second doStep on."""
     latch = Latch()
     afc.latch_start(ctypes.byref(latch), 2, ctypes.c_double(0.0), vector([0.0, 0.0]))  # placeholders
     true = lambda t: [0.3 * math.cos(3 * t), -0.9 * math.sin(3 * t)]  # noqa: E731
-    h, events = 1e-3, 0
-    assert afc.latch_observe(ctypes.byref(latch), ctypes.c_double(0.0), vector(true(0.0))) == RELATCHED
-    events = afc.latch_observe(ctypes.byref(latch), ctypes.c_double(h), vector(true(h)))
-    assert events == DECIDED and latch.origin == 0.0 and list(latch.latched[:2]) == true(0.0)
+    h = 1e-3
+    assert afc.latch_observe(ctypes.byref(latch), ctypes.c_double(0.0), vector([0.0, 0.0])) == 0
+    assert afc.latch_observe(ctypes.byref(latch), ctypes.c_double(h), vector(true(h))) == RELATCHED
+    assert afc.latch_observe(ctypes.byref(latch), ctypes.c_double(2 * h), vector(true(2 * h))) == DECIDED
+    assert latch.origin == h and list(latch.latched[:2]) == true(h) and latch.relatches == 1.0
     message = ctypes.create_string_buffer(2048)
     assert afc.latch_warning(ctypes.byref(latch), (ctypes.c_char_p * 4)(b"e", b"de", b"d2e", b"d3e"),
                              message, 2048) == 1
     assert message.value.decode().startswith(
         "initial error re-latched: rejected e = 0, de = 0 at t = 0 as placeholders (the host did not propagate "
-        "initial values); kept e = 0.3, de = -0 at t = 0 as e(0)")
+        f"initial values); kept e = {true(h)[0]:.9g}, de = {true(h)[1]:.9g} at t = 0.001 as e(0)")
 
 
 def test_a_pinned_latch_never_moves(afc):
@@ -203,18 +206,21 @@ def test_a_pinned_latch_never_moves(afc):
     assert list(latch.latched[:2]) == [0.1, 0.2]
 
 
-def test_the_chatter_monitor_warns_once_on_a_zig_zag_u_and_never_on_a_smooth_one(afc):
+@pytest.mark.parametrize("hertz,warnings", [(2.0, 0), (10.0, 0), (30.0, 1), (300.0, 1)])
+def test_the_chatter_monitor_reads_a_sines_frequency_and_warns_once_above_20_hz(afc, hertz, warnings):
+    """The statistic of u = 5 sin(2 pi f t) is f: no warning at 2 and 10 Hz, one at 30 and 300 Hz."""
     afc.chatter_update.restype = ctypes.c_int
     afc.chatter_frequency.restype = ctypes.c_double
-    h = 4e-4
-    for zig_zag, expected in ((False, 0), (True, 1)):
-        state = Chatter()
-        afc.chatter_start(ctypes.byref(state))
-        warnings = 0
-        for k in range(int(3.0 / h)):
-            u = 5.0 * math.sin(k * h) + (3.0 * (-1) ** k if zig_zag else 0.0)
-            warnings += afc.chatter_update(ctypes.byref(state), ctypes.c_double(u), ctypes.c_double(h))
-        assert warnings == expected
-    message = ctypes.create_string_buffer(2048)
-    afc.chatter_warning(ctypes.byref(state), ctypes.c_double(h), message, 2048)
-    assert message.value.decode().startswith("u chatters with communication step 0.0004 s: over the last ~1 s")
+    h = 1e-4
+    state = Chatter()
+    afc.chatter_start(ctypes.byref(state))
+    seen = 0
+    for k in range(int(3.0 / h)):
+        seen += afc.chatter_update(ctypes.byref(state), ctypes.c_double(5.0 * math.sin(2 * math.pi * hertz * k * h)),
+                                   ctypes.c_double(h))
+    assert seen == warnings
+    assert afc.chatter_frequency(ctypes.byref(state)) == pytest.approx(hertz, rel=0.1)
+    if warnings:
+        message = ctypes.create_string_buffer(2048)
+        afc.chatter_warning(ctypes.byref(state), ctypes.c_double(h), message, 2048)
+        assert message.value.decode().startswith("u chatters with communication step 0.0001 s: over the last ~1 s")
