@@ -67,7 +67,7 @@ class NativeModel:
     headers: tuple[Path, ...] = ()
 
 
-MODELS = (
+ALL_MODELS = (
     NativeModel("AdaptiveFuzzyController",
                 (ROOT / "fmu_src" / "adaptive_fuzzy_controller.c", ROOT / "fmu_src" / "afc_math.c",
                  ROOT / "fmu_src" / "initial_error_latch.c", ROOT / "fmu_src" / "chatter_monitor.c"),
@@ -82,7 +82,19 @@ MODELS = (
                  ROOT / "plants" / "plant_integration.c"),
                 (ROOT / "plants" / "plant_integration.h", ROOT / "plants" / "rk4_plant_slave.h")),
     NativeModel("TrackingReference", (ROOT / "plants" / "tracking_reference.c",)),
+    # the third-order plant of the general-order work (issue 17), when its Python edition exists
+    NativeModel("DcMotorArm",
+                (ROOT / "plants" / "dc_motor_arm.c", ROOT / "plants" / "rk4_plant_slave.c",
+                 ROOT / "plants" / "plant_integration.c"),
+                (ROOT / "plants" / "plant_integration.h", ROOT / "plants" / "rk4_plant_slave.h")),
 )
+
+
+def models() -> tuple[NativeModel, ...]:
+    """The native models whose pythonfmu edition (declaration table) is in build_fmu.FMUS."""
+    import build_fmu
+    declared = {f.model_identifier for f in build_fmu.FMUS}
+    return tuple(m for m in ALL_MODELS if m.model_identifier in declared)
 
 
 @dataclass(frozen=True)
@@ -163,10 +175,10 @@ def model_guid(model_identifier: str) -> str:
 
 
 def _model(model_identifier: str) -> NativeModel:
-    for model in MODELS:
+    for model in ALL_MODELS:
         if model.model_identifier == model_identifier:
             return model
-    raise KeyError(f"unknown FMU {model_identifier!r}; valid: {[m.model_identifier for m in MODELS]}")
+    raise KeyError(f"unknown FMU {model_identifier!r}; valid: {[m.model_identifier for m in models()]}")
 
 
 def _pretty(root: ET.Element) -> bytes:
@@ -251,13 +263,14 @@ def _c_double(value) -> str:
 
 
 def numbered_families(variables) -> dict[str, list[int]]:
-    """{prefix: value references of prefix1, prefix2, ...} for names numbered from 1 without gaps."""
+    """{family: value references of its members 1, 2, ...} for names numbered from 1 without gaps:
+    k1, k2 -> "k"; theta1.. -> "theta"; x1_start, x2_start -> "x_start"."""
     import re
     numbered = {}
     for vr, v in enumerate(variables):
-        match = re.fullmatch(r"([A-Za-z_]+?)(\d+)", v.name)
+        match = re.fullmatch(r"([A-Za-z_]+?)(\d+)((?:_[A-Za-z]+)?)", v.name)  # k1, theta12, x3_start
         if match:
-            numbered.setdefault(match.group(1), {})[int(match.group(2))] = vr
+            numbered.setdefault(match.group(1) + match.group(3), {})[int(match.group(2))] = vr
     families = {}
     for prefix, members in numbered.items():
         count = 0
@@ -391,7 +404,7 @@ def _selected(platforms) -> tuple[Target, ...]:
 
 def fmu_paths() -> dict[str, dict[int, Path]]:
     return {m.model_identifier: {2: NATIVE_DIR / f"{m.model_identifier}.fmu",
-                                 3: FMI3_DIR / f"{m.model_identifier}.fmu"} for m in MODELS}
+                                 3: FMI3_DIR / f"{m.model_identifier}.fmu"} for m in models()}
 
 
 def _zip(files: dict[str, bytes]) -> bytes:
@@ -465,7 +478,7 @@ def ensure_built(platforms=None, force: bool = False, verbose: bool = False, job
     platforms = tuple(platforms)
     zig_version = None
     result = {}
-    for model in MODELS:
+    for model in models():
         paths = fmu_paths()[model.model_identifier]
         stamp_file = WORK_DIR / "stamps" / f"{model.model_identifier}.stamp"
         stamp = _stamp(model, platforms)

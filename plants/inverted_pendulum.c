@@ -32,8 +32,8 @@ static double pendulum_disturbance(double t, double dist_gain) {
 }
 
 /* (dx1, dx2) of eq. (37) plus the disturbance d(t) in dx2 */
-static void pendulum_derivative(double t, double x1, double x2, double u, const double *params,
-                                double *dx1, double *dx2) {
+static void pendulum_derivative(double t, const double x[], double u, const double *params, double dx[]) {
+    double x1 = x[0], x2 = x[1];
     double gv = params[0], lp = params[1], mp_lp_over_mt = params[2], mp_over_mt = params[3];
     double inv_mt = params[4], dist_gain = params[5];
     double c = cos(x1);
@@ -42,8 +42,8 @@ static void pendulum_derivative(double t, double x1, double x2, double u, const 
     double rate = (gv * s - mp_lp_over_mt * x2 * x2 * c * s + c * inv_mt * u) / den;  /* (37) */
     if (dist_gain != 0.0) /* d(t), SPEC choice: additive in dx2 */
         rate += dist_gain * (3.0 * cos(2.0 * t) + 2.0 * sin((0.09 * t + 1.0) * t));
-    *dx1 = x2;
-    *dx2 = rate;
+    dx[0] = x2;
+    dx[1] = rate;
 }
 
 const PlantDerivative plant_derivative = pendulum_derivative;
@@ -54,8 +54,8 @@ int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
 }
 
 int model_compute_outputs(ModelInstance *m) {
-    V(m, y) = PLANT(m)->x1;
-    V(m, dy) = PLANT(m)->x2;
+    V(m, y) = PLANT(m)->x[0];
+    V(m, dy) = PLANT(m)->x[1];
     V(m, d) = pendulum_disturbance(m->s->time, V(m, dist_gain));
     m->outputs_stale = 0;
     return MODEL_OK;

@@ -40,8 +40,8 @@ static double manipulator_friction(double x2, double inertia, double cr, double 
 }
 
 /* (dx1, dx2) of eq. (38) with J, d, mr of (39) */
-static void manipulator_derivative(double t, double x1, double x2, double u, const double *params,
-                                   double *dx1, double *dx2) {
+static void manipulator_derivative(double t, const double x[], double u, const double *params, double dx[]) {
+    double x1 = x[0], x2 = x[1];
     double gv_lr = params[0], inertia_factor = params[1], dr_plus_vr = params[2], cr = params[3];
     double mr = params[4] + params[5] * sin(t);                  /* (39) */
     double torque = u - dr_plus_vr * x2 - mr * gv_lr * cos(x1);  /* (38), viscous part of d (39) */
@@ -49,8 +49,8 @@ static void manipulator_derivative(double t, double x1, double x2, double u, con
         torque -= cr;
     else if (x2 < 0.0)
         torque += cr;
-    *dx1 = x2;
-    *dx2 = torque / (inertia_factor * mr); /* J = 1.33 mr lr^2 (39) */
+    dx[0] = x2;
+    dx[1] = torque / (inertia_factor * mr); /* J = 1.33 mr lr^2 (39) */
 }
 
 const PlantDerivative plant_derivative = manipulator_derivative;
@@ -67,9 +67,9 @@ int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
 
 int model_compute_outputs(ModelInstance *m) {
     double mr = manipulator_payload(m->s->time, V(m, mr0), V(m, mr1));
-    V(m, y) = PLANT(m)->x1;
-    V(m, dy) = PLANT(m)->x2;
-    V(m, d) = manipulator_friction(PLANT(m)->x2, manipulator_inertia(mr, V(m, lr)), V(m, cr), V(m, vr));
+    V(m, y) = PLANT(m)->x[0];
+    V(m, dy) = PLANT(m)->x[1];
+    V(m, d) = manipulator_friction(PLANT(m)->x[1], manipulator_inertia(mr, V(m, lr)), V(m, cr), V(m, vr));
     V(m, mr) = mr;
     m->outputs_stale = 0;
     return MODEL_OK;

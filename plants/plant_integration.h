@@ -7,15 +7,17 @@
 /* relative slack when splitting a communication step into internal steps (SPLIT_TOLERANCE) */
 #define SPLIT_TOLERANCE 1e-12
 
-/* (dx1, dx2) of the model at (t, x1, x2) with input u; params: the model's constants */
-typedef void (*PlantDerivative)(double t, double x1, double x2, double u, const double *params,
-                                double *dx1, double *dx2);
+#define PLANT_MAX_STATES 8
+
+/* dx of the model at (t, x) with input u; params: the model's constants */
+typedef void (*PlantDerivative)(double t, const double x[], double u, const double *params, double dx[]);
 
 /* n = ceil(step_size / max_internal_step - 1e-12), at least 1 (0 for step_size 0) */
 long internal_step_count(double step_size, double max_internal_step);
 
-/* advance (x1, x2) from t to t + step_size with u held, in n equal RK4 steps */
-void rk4_advance(PlantDerivative derivative, double t, double *x1, double *x2, double u, double step_size,
-                 double max_internal_step, const double *params);
+/* advance the states x[0..states-1] from t to t + step_size with u held, in n equal RK4 steps
+ * (rk4_advance_states; with two states the same numbers as rk4_advance, bit for bit) */
+void rk4_advance_states(PlantDerivative derivative, double t, double x[], int states, double u,
+                        double step_size, double max_internal_step, const double *params);
 
 #endif

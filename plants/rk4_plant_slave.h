@@ -9,10 +9,12 @@
 
 #define PLANT_MAX_PARAMS 8
 
-/* the internal state (STATE_ATTRIBUTES = x1, x2) */
+/* the number of states: one x<k>_start parameter per state (x1, x2 for the paper's plants) */
+#define PLANT_STATES N_x_start
+
+/* the internal state (STATE_ATTRIBUTES = x1, x2, ...) */
 typedef struct {
-    double x1;
-    double x2;
+    double x[PLANT_STATES];
 } PlantState;
 
 #define PLANT(m) ((PlantState *)(m)->internal)

@@ -30,6 +30,9 @@ int model_compute_outputs(ModelInstance *m) {
     V(m, ddym) = -amplitude * omega * omega * s;
     V(m, e) = ym - V(m, y);
     V(m, de) = dym - V(m, dy);
+#ifdef VR_d2y /* third-order plants: d2e = ddym - d2y */
+    V(m, d2e) = V(m, ddym) - V(m, d2y);
+#endif
     m->outputs_stale = 0;
     return MODEL_OK;
 }

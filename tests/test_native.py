@@ -19,7 +19,7 @@ import build_native
 from tests.fmu_helpers import Driven
 
 ROOT = Path(__file__).resolve().parents[1]
-MODELS = [m.model_identifier for m in build_native.MODELS]
+MODELS = [m.model_identifier for m in build_native.models()]
 ELF_MAGIC = b"\x7fELF"
 MACHO_64 = 0xFEEDFACF
 FAT_MAGIC = 0xCAFEBABE
