@@ -29,15 +29,23 @@
 typedef fmi2Status Status;
 #define STATUS_OK fmi2OK
 #define STATUS_WARNING fmi2Warning
+#define STATUS_DISCARD fmi2Discard
 #define STATUS_ERROR fmi2Error
 #define STATUS_FATAL fmi2Fatal
+#define TERMINATE_CALL "fmi2Terminate"
+#define EXIT_INIT_CALL "fmi2ExitInitializationMode"
+#define SET_STATE_CALL "fmi2SetFMUstate"
 #elif FMI_VERSION == 3
 #include "fmi3Functions.h"
 typedef fmi3Status Status;
 #define STATUS_OK fmi3OK
 #define STATUS_WARNING fmi3Warning
+#define STATUS_DISCARD fmi3Discard
 #define STATUS_ERROR fmi3Error
 #define STATUS_FATAL fmi3Fatal
+#define TERMINATE_CALL "fmi3Terminate"
+#define EXIT_INIT_CALL "fmi3ExitInitializationMode"
+#define SET_STATE_CALL "fmi3SetFMUState"
 #else
 #error "compile with -DFMI_VERSION=2 or -DFMI_VERSION=3"
 #endif
@@ -286,17 +294,34 @@ static int refresh_outputs(ModelInstance *m) {
     return model_compute_outputs(m);
 }
 
-static Status do_step(ModelInstance *m, double current_time, double step_size) {
+/* doStep only between exitInitializationMode and terminate, with the communication point at the
+ * FMU's own time (where the last step ended, or the time of a restored state; 1e-9 relative) and
+ * a step >= 0; a refused doStep changes nothing and returns Discard (the wording and rules of
+ * afc_slave_base.TableSlave._refuse_step) */
+static Status do_step(ModelInstance *m, double current_time, double step_size, const char *call) {
     REPRS;
-    if (!(step_size >= 0.0)) {
-        fmu_fail(m, "doStep with communication step %s; it must be >= 0", R(step_size));
-        return STATUS_ERROR;
-    }
-    double tolerance = 1e-9 * (1.0 + fabs(m->s->time));
-    if (!(fabs(current_time - m->s->time) <= tolerance)) {
-        fmu_fail(m, "doStep at t = %s but the FMU is at t = %s; steps must follow each other "
-                 "(restore an FMU state to go back)", R(current_time), R(m->s->time));
-        return STATUS_ERROR;
+    double time = m->s->time;
+    if (!(m->mode == MODE_STEP && step_size >= 0.0 &&
+          fabs(current_time - time) <= 1e-9 * (fabs(time) + step_size))) {
+        const char *rule;
+        char expected[256];
+        if (m->mode == MODE_TERMINATED)
+            rule = "the FMU was terminated (" TERMINATE_CALL "); doStep is allowed only between "
+                   EXIT_INIT_CALL " and " TERMINATE_CALL;
+        else if (m->mode != MODE_STEP)
+            rule = "the FMU is not initialised: call " EXIT_INIT_CALL " first; doStep is allowed only "
+                   "between " EXIT_INIT_CALL " and " TERMINATE_CALL;
+        else if (!(step_size >= 0.0))
+            rule = "the communication step must be >= 0";
+        else {
+            snprintf(expected, sizeof expected, "expected currentCommunicationPoint = %s, the FMU's time (where "
+                     "the last step ended, or the time of the state restored by " SET_STATE_CALL "); a step "
+                     "must start there", R(time));
+            rule = expected;
+        }
+        fmu_fail(m, "%s(currentCommunicationPoint = %s, communicationStepSize = %s) refused: %s; state and time "
+                 "unchanged", call, R(current_time), R(step_size), rule);
+        return STATUS_DISCARD;
     }
     if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return STATUS_ERROR;
     if (model_step(m, current_time, step_size) != MODEL_OK) return STATUS_ERROR;
@@ -339,17 +364,27 @@ static Status get_values(ModelInstance *m, const unsigned *vr, size_t n, double 
 }
 
 /* TableSlave._reject plus the fixed-parameter rule */
+/* TableSlave._reject: outputs are never set; after terminate nothing; parameters (variability
+ * fixed) only before exitInitializationMode; NaN and inf never */
 static int settable(ModelInstance *m, unsigned vr, double value, const char *call) {
     REPRS;
     const VariableInfo *v = &MODEL_VARIABLES[vr];
+    char text[40], kept[40];
     if (v->causality == CAUSALITY_OUTPUT) {
         fmu_fail(m, "%s is an output and cannot be set", v->name);
         return 0;
     }
+    if (m->mode == MODE_TERMINATED) {
+        fmu_fail(m, "%s: %s = %s refused: the FMU was terminated (" TERMINATE_CALL "); no variable can be set "
+                 "after " TERMINATE_CALL, call, v->name, value_repr((int)vr, value, text));
+        return 0;
+    }
     if (v->causality == CAUSALITY_PARAMETER) {
-        if (!(m->mode & (MODE_INSTANTIATED | MODE_INITIALIZATION))) {
-            fmu_fail(m, "%s: parameter %s has variability fixed and cannot be set in state %s; "
-                     "set it before exitInitializationMode", call, v->name, mode_name(m->mode));
+        if (m->mode == MODE_STEP) {
+            fmu_fail(m, "%s: %s = %s refused at t = %s: %s is a parameter of variability fixed, which can be set "
+                     "only before " EXIT_INIT_CALL " (it keeps %s); in step mode only inputs can be set", call,
+                     v->name, value_repr((int)vr, value, text), R(m->s->time), v->name,
+                     value_repr((int)vr, m->s->values[vr], kept));
             return 0;
         }
         if (!isfinite(value)) {
@@ -369,7 +404,7 @@ static int settable(ModelInstance *m, unsigned vr, double value, const char *cal
 
 static Status set_values(ModelInstance *m, const unsigned *vr, size_t n, const double *real, const int *integer,
                          const char *call) {
-    CHECK(call, MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP);
+    CHECK(call, ANY_MODE); /* the rules per variable and state: settable() */
     Status status = STATUS_OK;
     for (size_t i = 0; i < n; i++) {
         if (!valid_reference(m, vr[i], integer != NULL, call)) { status = STATUS_ERROR; break; }
@@ -648,9 +683,8 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
     (void)noSetFMUStatePriorToCurrentPoint;
-    ModelInstance *m = M;
-    CHECK("fmi2DoStep", MODE_STEP);
-    return do_step(m, currentCommunicationPoint, communicationStepSize);
+    if (!c) return fmi2Error;
+    return do_step(M, currentCommunicationPoint, communicationStepSize, "fmi2DoStep");
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c) { UNSUPPORTED2("fmi2CancelStep (doStep never returns fmi2Pending)"); }
@@ -1026,8 +1060,8 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
     (void)noSetFMUStatePriorToCurrentPoint;
     ModelInstance *m = M;
-    CHECK("fmi3DoStep", MODE_STEP);
-    fmi3Status status = do_step(m, currentCommunicationPoint, communicationStepSize);
+    if (!m) return fmi3Error;
+    fmi3Status status = do_step(m, currentCommunicationPoint, communicationStepSize, "fmi3DoStep");
     if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
     if (terminateSimulation) *terminateSimulation = fmi3False;
     if (earlyReturn) *earlyReturn = fmi3False;

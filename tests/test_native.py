@@ -363,21 +363,38 @@ def test_native_fmu_state_get_set_and_serialize_are_exact(native):
         other.free()
 
 
+def _discarded(driven: Driven, call) -> str:
+    """Run a call that must return fmi2Discard; its logged reason."""
+    driven.messages.clear()
+    with pytest.raises(FMICallException) as raised:
+        call()
+    assert raised.value.status == 2  # fmi2Discard: refused, nothing changed
+    return driven.messages[-1][1].partition(": ")[2]
+
+
 def test_native_life_cycle_rules(native):
+    """FMI's calling sequence, with the wording of the FMI rules of the shared slave base."""
     driven = Driven(native["InvertedPendulum"][2])
     try:
-        driven.messages.clear()
-        with pytest.raises(FMICallException):
-            driven.slave.doStep(0.0, 1e-3)  # before initialisation
-        assert "fmi2DoStep is not allowed in state Instantiated" in driven.messages[-1][1]
+        assert _discarded(driven, lambda: driven.slave.doStep(0.0, 1e-3)) == (
+            "fmi2DoStep(currentCommunicationPoint = 0.0, communicationStepSize = 0.001) refused: the FMU is not "
+            "initialised: call fmi2ExitInitializationMode first; doStep is allowed only between "
+            "fmi2ExitInitializationMode and fmi2Terminate; state and time unchanged")
         driven.initialize()
         message = _fail_message(driven, lambda: driven.set(mp=1.0))
-        assert "parameter mp has variability fixed" in message
+        assert message == ("fmi2SetReal: mp = 1.0 refused at t = 0.0: mp is a parameter of variability fixed, "
+                           "which can be set only before fmi2ExitInitializationMode (it keeps 0.1); in step mode "
+                           "only inputs can be set")
         driven.slave.doStep(0.0, 1e-3)
-        message = _fail_message(driven, lambda: driven.slave.doStep(0.5, 1e-3))
-        assert "doStep at t = 0.5 but the FMU is at t = 0.001" in message
+        assert "expected currentCommunicationPoint = 0.001, the FMU's time" in _discarded(
+            driven, lambda: driven.slave.doStep(0.5, 1e-3))
+        assert "the communication step must be >= 0" in _discarded(driven, lambda: driven.slave.doStep(1e-3, -1.0))
+        driven.slave.doStep(1e-3 + 1e-15, 1e-3)  # rounding of the communication point is accepted
         message = _fail_message(driven, lambda: driven.slave.getDirectionalDerivative([9], [8], [1.0]))
         assert message == "fmi2GetDirectionalDerivative is not supported by this FMU"
+        driven.slave.terminate()
+        assert "the FMU was terminated (fmi2Terminate)" in _discarded(driven, lambda: driven.slave.doStep(2e-3, 1e-3))
+        assert "no variable can be set after fmi2Terminate" in _fail_message(driven, lambda: driven.set(u=1.0))
         driven.slave.reset()  # back to instantiated, start values
         driven.initialize(x1_start=0.5)
         assert driven.get("y") == 0.5
