@@ -453,6 +453,10 @@ static Status set_state(ModelInstance *m, const void *state) {
     memcpy(m->s, state, snapshot_bytes());
     m->stale_on_set = m->feedthrough || m->s->initialized == 0.0;
     m->outputs_stale = 1;
+    /* the restored state decides the mode: an initialised state steps from its time, also in
+     * a fresh instance (the FMU is as it was when the state was taken); terminate stays final */
+    if (m->mode != MODE_TERMINATED)
+        m->mode = m->s->initialized != 0.0 ? MODE_STEP : (m->mode == MODE_STEP ? MODE_INITIALIZATION : m->mode);
     return STATUS_OK;
 }
 
