@@ -361,6 +361,15 @@ def test_native_fmu_state_get_set_and_serialize_are_exact(native):
         assert any("deSerializeFMUState" in m for _, m in other.messages)
     finally:
         other.free()
+    fresh = Driven(native["AdaptiveFuzzyController"][2])  # only instantiated: the state brings step mode
+    try:
+        fresh.slave.setFMUstate(fresh.slave.deSerializeFMUstate(blob))
+        t = 100 * 1e-3
+        fresh.set(e=0.3 * math.cos(3 * t), de=-0.9 * math.sin(3 * t), ym=0.2 * math.sin(t), dym=0.2 * math.cos(t))
+        assert fresh.get("u", "E", "dE", "alpha1", "alpha2", "theta1", "theta2", "theta3", "theta4") == trace[100]
+        fresh.slave.doStep(t, 1e-3)
+    finally:
+        fresh.free()
 
 
 def _discarded(driven: Driven, call) -> str:
