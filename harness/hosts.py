@@ -563,10 +563,12 @@ def _pct(value: float) -> str:
 #: what a user of another FMI tool must know (docs/hosts.md; the README gives the same in three lines)
 USER_NOTES = """## What a user of another FMI tool must know
 
-- **Step**: a host that delays every connection one step (Jacobi: nearly every engine) needs about 3x smaller
-  steps than our feedthrough-aware master for the same 1 %: the controller FMU's DefaultExperiment stepSize
-  (0.1 ms) is safe on the pendulum, the manipulator needs the step in the table below; `export-ssp` writes the
-  right one into the SSP. Above it the loop chatters (pendulum at 0.4 ms: ITAE 12x, Ec 85x) without failing.
+- **Step**: a host that delays every connection one step (Jacobi: nearly every engine) needs much smaller
+  steps than our feedthrough-aware master for the same 1 % (3-5x for `vud`, up to 50x for `fixed`:
+  docs/convergence.md): the controller FMU's DefaultExperiment stepSize (64 us) is safe on the pendulum, the
+  manipulator needs the step in the table below; `export-ssp` writes the right one into the SSP. Above it the
+  results drift by more than 1 %, and from about 0.4 ms on the pendulum chatters (ITAE 12x, Ec 85x) without
+  failing.
 - **Initial values**: the controller latches e(0), de(0) of the modified error (Remark 3) when initialisation
   ends, from the inputs set by then: a host that does not propagate initial values must give the connected
   inputs their consistent start values (`export-ssp` does), or the rows below without propagation are off.
