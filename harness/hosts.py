@@ -607,7 +607,12 @@ def matrix_markdown(matrix: dict) -> str:
              "(harness/step_study.py; within 1 % = **ok**). *validated* is the validated step (1 %) of "
              "docs/convergence.md for the host's scheme (our feedthrough master, or Jacobi for every other host); "
              "*scenario* is the scenario's own step (Table I/II). Warnings are the FMU's log messages with status "
-             "Warning, and where the host gives them to us.", ""]
+             "Warning, and where the host gives them to us.", "",
+             "```bash",
+             "pip install -e '.[hosts]'      # libcosimpy and fmu-manipulation-toolbox (ecospy, fmpy: always)",
+             "python -m harness hosts pendulum_case1 manipulator --stop manipulator=5   # results/hosts/",
+             "python -m harness hosts --host ecos libcosim-api --steps validated --apply  # also docs/hosts.md",
+             "```", ""]
     lines += [USER_NOTES, ""] + steps_for_hosts(convergence) + [""]
     for host in HOSTS:
         if host.key in matrix.get("skipped", {}):
@@ -656,8 +661,11 @@ def hosts_command(args) -> int:
         except ValueError:
             print(f"error: --stop {item!r}: give seconds, or SCENARIO=seconds", file=sys.stderr)
             return 2
-    matrix = hosts_matrix(names, tuple(args.controller), keys, tuple(args.steps),
-                          {name: stops.get(name) for name in names}, args.jobs)
+    if args.from_json:  # rewrite the outputs (and --apply them) from a matrix already run
+        matrix = json.loads(Path(args.from_json).read_text())
+    else:
+        matrix = hosts_matrix(names, tuple(args.controller), keys, tuple(args.steps),
+                              {name: stops.get(name) for name in names}, args.jobs)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "hosts.json").write_text(json.dumps(matrix, indent=1))
@@ -693,5 +701,6 @@ def register(commands):
     command.add_argument("--jobs", type=int, help="parallel processes (default: every core)")
     command.add_argument("--out", default=str(DEFAULT_OUT),
                          help=f"output folder (default {DEFAULT_OUT.relative_to(ROOT)}/)")
+    command.add_argument("--from-json", help="do not run: rewrite the outputs from this matrix's hosts.json")
     command.add_argument("--apply", action="store_true", help="also write docs/hosts.md (a tracked file)")
     command.set_defaults(handler=hosts_command)
