@@ -1,6 +1,7 @@
 """End-to-end: `tables` and `convergence` on a shortened horizon (issue 5)."""
 import csv
 import json
+import re
 
 from harness.cli import main as cli_main
 
@@ -22,7 +23,10 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys):
     report = (tmp_path / "report.md").read_text()
     assert "## Table I: inverted pendulum" in report and "## Table II" in report
     assert "## Claims of the paper, checked" in report
-    assert report.count("reproduced**") >= 8  # every claim has a verdict
+    verdicts = re.findall(r"(?m)^- \*\*([^*]+)\*\*: The ", report)
+    assert len(verdicts) == 8, verdicts  # every claim has exactly one verdict...
+    assert set(verdicts) <= {"reproduced", "not reproduced", "not decided at this accuracy"}, verdicts
+    assert report.count(" ± ") >= 8 * 3  # ...stated with the numbers and their errors
     for name in ("pendulum_case1", "pendulum_case2", "pendulum_case3", "manipulator"):
         assert (tmp_path / f"{name}.png").stat().st_size > 10_000
         assert f"({name}.png)" in report
