@@ -112,3 +112,24 @@ def test_the_projection_holds_theta_within_m_theta_plus_delta_from_both_sides(fm
     # above m_theta with tau < 0 the plain law applies: theta4 falls back at the full rate
     assert history[100, 3] > m_theta and history[250, 3] < history[100, 3] - 0.01
     c.free()
+
+
+@pytest.mark.parametrize("variant", [1, 2])
+def test_the_state_input_ablation_feeds_the_state_to_the_fls_and_the_error_to_tau(fmu_paths, variant):
+    """fls_input = 2 (Remark 4's ablation): xi from x = [ym - e, dym - de]; tau still from [E, dE]."""
+    theta0, gamma, h, lambda_ce, kappa1, kappa2 = -0.4, 120.0, 0.01, 0.9, 10.0, 4.0
+    c = controller(fmu_paths, f"state_input_{variant}", variant=variant, fls_input=2, theta0=theta0, gamma=gamma,
+                   lambda_ce=lambda_ce, kappa1=kappa1, kappa2=kappa2)
+    e, de, ym, dym = 0.15, -0.3, 0.4, -0.25
+    x1, x2 = ym - e, dym - de  # 0.25, 0.05: the state, not the error
+    c.set(e=e, de=de, ym=ym, dym=dym)
+    if variant == 1:
+        alphas = (1 - lambda_ce * math.exp(-kappa1 * x1 * x1), 1 - lambda_ce * math.exp(-kappa2 * x2 * x2))
+    else:
+        alphas = (1.0, 1.0)
+    assert c.get("alpha1", "alpha2") == pytest.approx(alphas, abs=1e-15)
+    c.slave.doStep(0.0, h)
+    p12, p22 = p12_p22(**GAINS)
+    expected = theta0 + h * gamma * (e * p12 + de * p22) * basis(x1, x2, *alphas)
+    np.testing.assert_allclose(c.get(*THETAS), expected, rtol=0, atol=1e-13)
+    c.free()

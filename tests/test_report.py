@@ -27,6 +27,7 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys):
     assert len(verdicts) == 8, verdicts  # every claim has exactly one verdict...
     assert set(verdicts) <= {"reproduced", "not reproduced", "not decided at this accuracy"}, verdicts
     assert report.count(" ± ") >= 8 * 3  # ...stated with the numbers and their errors
+    assert "vud" in report and "(h = 0.0002 s" in report and "(h = 2.5e-05 s" in report  # from the h/2 runs
     for name in ("pendulum_case1", "pendulum_case2", "pendulum_case3", "manipulator"):
         assert (tmp_path / f"{name}.png").stat().st_size > 10_000
         assert f"({name}.png)" in report
