@@ -174,3 +174,37 @@ def test_plus_minus_keeps_two_digits_of_the_error():
     assert claims.plus_minus(0.3208236, 1.1e-5) == "0.320824 ± 1.1e-05"
     assert claims.plus_minus(1.0, 0.0) == "1 ± 0"
     assert claims.plus_minus(1.0, math.inf) == "1 ± ?"
+
+
+# ------------------------------------------------------------------ refinement (tables --refine)
+def test_refinement_runs_the_open_cases_at_half_their_finest_step_and_decides_again(monkeypatch):
+    """refine_open_claims asks for exactly the cases of open comparisons, at half their finest
+    step, appends their runs and decides again; it stops when nothing is open."""
+    from harness import report_tables
+
+    ladder_set = ladders({("pendulum_case1", "vud", "Ec"): (418.234, 418.222),
+                          ("pendulum_case1", "fixed", "Ec"): (430.500, 430.485),
+                          ("pendulum_case1", "fae", "Ec"): (418.322, 418.169)})
+    for case in (2, 3):  # vud least in the other cases
+        ladder_set[(f"pendulum_case{case}", "fixed")][1]["Ec"] = ladder_set[(f"pendulum_case{case}", "fixed")][0]["Ec"] = 500.0
+        ladder_set[(f"pendulum_case{case}", "fae")][1]["Ec"] = ladder_set[(f"pendulum_case{case}", "fae")][0]["Ec"] = 500.0
+    assert [c.verdict for c in claims.claims_check(ladder_set) if "control energy" in c.label] == [UNDECIDED]
+    finer = {"vud": 418.217, "fae": 418.096}  # the 0.1 ms runs of the step study
+    requested = []
+
+    def fake_run_cases(cases, jobs=None, description="", progress=None):
+        requested.append([(c.scenario, c.controller, c.step) for c in cases])
+        return [outcome(c.scenario, c.controller, c.step,
+                        **{m: DEFAULT[c.controller] for m in METRICS if m != "Ec"}, Ec=finer[c.controller])
+                for c in cases]
+
+    monkeypatch.setattr(report_tables, "run_cases", fake_run_cases)
+    found, refined = report_tables.refine_open_claims(ladder_set, stop=None, jobs=1, levels=3)
+    assert len(requested) == 1  # one level was enough
+    assert sorted(requested[0]) == [("pendulum_case1", "fae", STEP / 4), ("pendulum_case1", "vud", STEP / 4)]
+    assert sorted(refined) == sorted(requested[0])
+    assert [c.verdict for c in found if "control energy" in c.label] == [NOT_REPRODUCED]
+    assert all(c.verdict != UNDECIDED for c in found)
+    requested.clear()
+    assert report_tables.refine_open_claims(ladders(), stop=None, jobs=1, levels=3)[1] == []
+    assert requested == []  # nothing open: nothing run
