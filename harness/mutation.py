@@ -8,7 +8,9 @@ the FMUs built from the mutated file (the others are copied built), runs a fast
 selection of tests with ``-x`` and reports the mutant *killed* (a test failed, the
 build failed, or the tests timed out) or *survived*.  A mutation whose pattern no
 longer matches its function (the source was rewritten) is reported as
-*pattern not found*, never skipped: update its pattern.
+*pattern not found*, never skipped: update its pattern.  A test selection that does
+not run (pytest usage or internal error) is an *error*, never counted as a kill.
+Exit status: 0 all killed, 1 survivors, 2 a pattern not found or an error.
 
 The selection is deliberately not the regression references (tests/test_regression.py,
 which this same code produced) but the tests that check the math against the paper.
@@ -229,7 +231,7 @@ def stale_fmus(mutation: Mutation, target: Path) -> list[Path]:
 @dataclass
 class Outcome:
     mutation: Mutation
-    status: str  # killed, survived, pattern not found
+    status: str  # killed, survived, pattern not found, error (the tests did not run)
     detail: str
     seconds: float
 
@@ -261,6 +263,9 @@ def run_mutant(mutation: Mutation, built: dict, tests: tuple | None = None, time
         return Outcome(mutation, "survived", _last_line(output), seconds)
     if completed.returncode == 5:  # pytest: no tests collected
         return Outcome(mutation, "survived", "no test ran: " + _last_line(output), seconds)
+    if completed.returncode != 1:  # 2 interrupted, 3 internal error, 4 usage error: no verdict
+        return Outcome(mutation, "error", f"pytest exit status {completed.returncode}: {_last_line(output)}",
+                       seconds)
     failed = re.findall(r"^(?:FAILED|ERROR) (\S+)", output, re.M)
     detail = f"by {failed[0]}" if failed else _last_line(output)
     return Outcome(mutation, "killed", detail, seconds)
@@ -301,8 +306,8 @@ def mutate_command(args) -> int:
                             "mutants", progress=None)
     for outcome in outcomes:
         print(f"{outcome.status.upper():17s} {outcome.mutation.name:32s} {outcome.seconds:6.1f} s  {outcome.detail}")
-    missing = [o for o in outcomes if o.status == "pattern not found"]
-    tried = [o for o in outcomes if o.status != "pattern not found"]
+    missing = [o for o in outcomes if o.status in ("pattern not found", "error")]
+    tried = [o for o in outcomes if o.status in ("killed", "survived")]
     killed = [o for o in tried if o.status == "killed"]
     survivors = [o for o in tried if o.status == "survived"]
     print(f"\nmutation score: {len(killed)}/{len(tried)} killed in {clock.perf_counter() - started:.0f} s")
@@ -310,8 +315,10 @@ def mutate_command(args) -> int:
         print(f"  survived: {outcome.mutation.name} ({outcome.mutation.why}; {outcome.mutation.path}:"
               f"{outcome.mutation.function})")
     for outcome in missing:
-        print(f"error: mutation {outcome.mutation.name}: pattern not found: {outcome.detail}; update its pattern "
-              "in harness/mutation.py", file=sys.stderr)
+        advice = ("update its pattern in harness/mutation.py" if outcome.status == "pattern not found"
+                  else "the test selection did not run")
+        print(f"error: mutation {outcome.mutation.name}: {outcome.status}: {outcome.detail}; {advice}",
+              file=sys.stderr)
     return 2 if missing else (1 if survivors else 0)
 
 

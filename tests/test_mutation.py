@@ -47,3 +47,10 @@ def test_the_command_kills_a_mutant_and_reports_a_survivor(fmu_paths, capsys):
     out = capsys.readouterr().out
     assert "SURVIVED" in out and "mutation score: 0/1 killed" in out
     assert "survived: tau_p12_p22_swap (tau = [E, dE] P B with p12 and p22 swapped (31)" in out
+
+
+def test_a_test_selection_that_does_not_run_is_an_error_not_a_kill(fmu_paths, capsys):
+    assert cli_main(["mutate", "--only", "tau_p12_p22_swap", "--tests", "tests/no_such_test_file.py"]) == 2
+    captured = capsys.readouterr()
+    assert "mutation score: 0/0" in captured.out and "ERROR" in captured.out
+    assert "error: mutation tau_p12_p22_swap: error: pytest exit status 4" in captured.err
