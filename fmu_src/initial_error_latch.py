@@ -101,8 +101,10 @@ def consistent(previous, current, h: float) -> bool:
 def observe(state: list, time: float, sample) -> int:
     """Watch the inputs of one doStep at ``time``; a bit set of RELATCHED and DECIDED.
 
-    The caller checks ``state[OPEN]`` first (0 = decided: nothing to do).
+    Once decided (``state[OPEN]`` = 0; callers check it first) it does nothing.
     """
+    if state[OPEN] <= 0:
+        return 0
     n = order(state)
     previous_at = LATCHED + n
     previous = state[previous_at:previous_at + n]

@@ -18,7 +18,11 @@ from __future__ import annotations
 import numpy as np
 
 from harness.scores import score
+from fmpy import extract
+
 from tests.fmu_helpers import Driven
+
+_UNZIPPED = {}  # FMU path -> its extracted folder, shared by the instances of a test session
 
 
 def run(scenario, fmu_paths: dict, algorithm: str = "jacobi", order: tuple = (), stop: float | None = None,
@@ -30,7 +34,10 @@ def run(scenario, fmu_paths: dict, algorithm: str = "jacobi", order: tuple = (),
     units = {}
     try:
         for name, spec in scenario.components.items():
-            unit = Driven(fmu_paths[spec.fmu], instance_name=name)
+            path = str(fmu_paths[spec.fmu])
+            if path not in _UNZIPPED:
+                _UNZIPPED[path] = extract(path)
+            unit = Driven(path, instance_name=name, unzip_dir=_UNZIPPED[path])
             units[name] = unit
             parameters = dict(spec.parameters, **(overrides or {}).get(name, {}))
             unit.enter(scenario.start, **parameters)
