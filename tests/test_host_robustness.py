@@ -111,7 +111,33 @@ def test_reference_jump_after_the_start_does_not_relatch(fmu_paths):
     for k in range(30, 60):
         c.slave.doStep(k * h, h)
         c.set(e=1.2 + 0.01 * (k % 2), de=0.0)
+    c.set(e=1.2, de=4.0)
+    expected = afc_math.modified_error(1.2, 4.0, 60 * h, 0.3, -0.5, 5.0)  # still the latch of t = 0
+    assert c.get("E", "dE") == [pytest.approx(v, abs=1e-14) for v in expected]
     assert c.messages == []
+    c.free()
+
+
+def test_relatch_restarts_adaptation_and_moves_the_time_origin(fmu_paths):
+    from fmu_src import afc_math
+
+    h, theta0 = 1e-3, 0.7
+    c = Driven(fmu_paths["AdaptiveFuzzyController"]).initialize(theta0=theta0, e=0.1, de=0.0)
+    for k in range(3):  # the placeholders (user guesses) stay while a deep chain fills: E moves
+        c.slave.doStep(k * h, h)
+    assert c.get("theta1") != theta0  # the adaptation ran on the guessed latch
+    t2, true = 3 * h, dict(e=-0.26, de=0.52)
+    c.set(**true)
+    c.slave.doStep(t2, h)  # inconsistent with the guesses: re-latch at t2, adaptation restarted
+    # E(t2) = dE(t2) = 0 at the new latch, so the step from t2 leaves theta at theta0
+    assert c.get("theta1", "theta2", "theta3", "theta4") == [theta0] * 4
+    t3, later = 4 * h, dict(e=-0.26 + 0.52 * h, de=0.52)
+    c.set(**later)
+    expected = afc_math.modified_error(later["e"], later["de"], t3 - t2, true["e"], true["de"], 5.0)
+    assert c.get("E", "dE") == [pytest.approx(v, rel=1e-12) for v in expected]
+    c.slave.doStep(t3, h)  # a consistent pair: decided, one warning naming both latches
+    (warning,) = warnings_of({"c": c.messages}, "c")
+    assert "rejected e = 0.1, de = 0 at t = 0 " in warning and "kept e = -0.26, de = 0.52 at t = 0.003 " in warning
     c.free()
 
 
