@@ -29,6 +29,7 @@ import math
 AVERAGING_TIME = 1.0  # s, time constant of both exponential averages
 WARMUP = 1.0  # s after the start before any verdict
 THRESHOLD_HZ = 20.0  # converged loops: < 1.9 Hz; chattering ones: > 170 Hz
+CONVERGED_HZ = 2.0  # what converged loops stay below (measured, for the message)
 U_FLOOR = 1e-9  # in the units of u: the mean magnitude never counts as smaller
 
 # The largest communication step validated (ITAE, IAE, Ec within 1 % of the converged run) for
@@ -87,8 +88,8 @@ def warning(state: list, step_size: float) -> str:
     """The message for the host's log when ``update`` returned True."""
     validated = ", ".join(f"{step:g} s for {family}" for family, step in JACOBI_VALIDATED_STEP.items())
     return (f"u chatters with communication step {step_size:g} s: over the last ~{AVERAGING_TIME:g} s it varies "
-            f"like a {frequency(state):.3g} Hz sine (total variation {state[VARIATION_RATE]:.4g}/s, mean |u| "
-            f"{state[MAGNITUDE]:.4g}; converged loops stay below {THRESHOLD_HZ:g} Hz), so the results are "
-            f"not the controller's. Use a smaller step (largest validated for a host that delays every link, "
+            f"like a {frequency(state):.4g} Hz sine (total variation {state[VARIATION_RATE]:.4g}/s, mean |u| "
+            f"{state[MAGNITUDE]:.4g}): over the {THRESHOLD_HZ:g} Hz threshold (converged loops stay below "
+            f"{CONVERGED_HZ:g} Hz), so the results are not the controller's. Use a smaller step (largest validated for a host that delays every link, "
             f"Jacobi: {validated}), or a master that respects direct feedthrough (u depends directly on e, "
             f"de, ym, dym: set them, then read u, at the same communication point)")
