@@ -100,6 +100,7 @@ class AdaptiveFuzzyController(Fmi2Slave):
 
     def initialize(self, start_time):
         _, self.p12, self.p22 = afc_math.lyapunov_p(self.k1, self.k2, self.q1, self.q2)
+        self.latch = [0.0] * latch_rule.size(len(ERROR_INPUTS))  # n = the error vector's length
         if self.initial_error == INITIAL_ERROR_PINNED:
             latch_rule.pin(self.latch, start_time, [getattr(self, name) for name in INITIAL_ERROR_PARAMETERS])
         else:  # tentative: checked over the first doSteps (Remark 3, initial_error_latch)
