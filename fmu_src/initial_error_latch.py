@@ -16,7 +16,11 @@ module decides, over the first doSteps, which sample to keep (docs/host_robustne
         | x_i - x_i,prev - h (x_i+1 + x_i+1,prev) / 2 |
             <= RELATIVE_TOLERANCE * max(|x_i - x_i,prev|, h |x_i+1 + x_i+1,prev| / 2) + ABSOLUTE_FLOOR.
      A consistent pair whose samples differ decides the latch for good.  An inconsistent pair
-     shows the earlier sample was a placeholder: re-latch from the current one (t0 = t).
+     shows the earlier sample was a placeholder: re-latch from the current one (t0 = t) --
+     unless the latch was already moved and the start inputs (the first latch) agree with the
+     current sample over the whole interval: then the samples in between were the
+     placeholders (fmpy's SSP simulator hands 0 for two steps after consistent start values):
+     go back to the start inputs and decide.
      Two identical samples (a constant error, or placeholders twice) are consistent but tell
      nothing: the latch stays and the window goes on.
    * after CHECK_STEPS observations the latch is decided as it stands.
@@ -112,6 +116,11 @@ def observe(state: list, time: float, sample) -> int:
     h = time - state[PREVIOUS_TIME]
     events = 0
     if current != previous:
+        if h > 0.0 and n > 1 and state[RELATCHES] and _start_agrees(state, time, current):
+            _restore_start(state)  # the start inputs were right, the samples in between were not
+            state[OPEN] = 0
+            state[CONFIRMED] = 1
+            return RELATCHED | DECIDED
         if h <= 0.0 or not consistent(previous, current, h):
             _relatch(state, time, current)
             events = RELATCHED
@@ -126,6 +135,21 @@ def observe(state: list, time: float, sample) -> int:
         state[OPEN] = 0
         events |= DECIDED
     return events
+
+
+def _start_agrees(state: list, time: float, current: list) -> bool:
+    """Is the first latch rejected (the start inputs) consistent with the current sample?"""
+    n = order(state)
+    start_at = LATCHED + 2 * n
+    return time > state[REJECTED_TIME] and consistent(state[start_at:start_at + n], current,
+                                                      time - state[REJECTED_TIME])
+
+
+def _restore_start(state: list) -> None:
+    n = order(state)
+    state[LATCHED:LATCHED + n] = state[LATCHED + 2 * n:LATCHED + 3 * n]
+    state[ORIGIN] = state[REJECTED_TIME]
+    state[RELATCHES] = 0
 
 
 def _relatch(state: list, time: float, current: list) -> None:

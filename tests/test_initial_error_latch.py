@@ -108,3 +108,14 @@ def test_absolute_floor_accepts_round_off_of_a_zero_error():
     state = fresh(sample=[0.0, 0.0])
     assert latch.observe(state, 0.0, [0.0, 0.0]) == 0
     assert latch.observe(state, H, [1e-12, 0.0]) == latch.DECIDED
+
+
+def test_placeholders_after_good_start_inputs_keep_the_start_inputs():
+    # fmpy's SSP simulator: consistent start values at initialisation, then its connectors
+    # hand 0 for two steps, then the true (one-step delayed) samples
+    state = fresh()
+    assert latch.observe(state, 0.0, [0.0, 0.0]) == latch.RELATCHED
+    assert latch.observe(state, H, [0.0, 0.0]) == 0
+    assert latch.observe(state, 2 * H, signal(2 * H)) == latch.RELATCHED | latch.DECIDED
+    assert latch.latched(state) == signal(0.0) and state[latch.ORIGIN] == 0.0
+    assert latch.warning(state, ("e", "de")) is None
