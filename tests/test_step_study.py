@@ -1,6 +1,7 @@
 """The step study by accuracy (harness/step_study.py): search, criterion, outputs, and what uses it."""
 import json
 import math
+import re
 import subprocess
 import sys
 import zipfile
@@ -182,3 +183,16 @@ def test_runs_are_scored_on_the_true_tracking_error(fmu_paths):
     delayed = itae(result.time, s("reference.e"), s("reference.de"))
     assert scored["ITAE"] == true
     assert abs(delayed / true - 1) > 1e-3, (delayed, true)
+
+
+def test_the_chatter_warning_names_the_jacobi_steps_of_the_study(committed):
+    sys.path.insert(0, str(ROOT / "fmu_src"))
+    import chatter_monitor
+
+    families = {"the paper's pendulum scenarios": PENDULUM, "the manipulator": ("manipulator",)}
+    for family, names in families.items():
+        assert chatter_monitor.JACOBI_VALIDATED_STEP[family] == min(
+            step_study.jacobi_safe_step(committed, name) for name in names), family
+    c_source = (ROOT / "fmu_src" / "chatter_monitor.c").read_text()  # the C twin prints the same steps
+    in_c = re.search(r"CHATTER_THRESHOLD_HZ, ([0-9.e+-]+), ([0-9.e+-]+)\);", c_source)
+    assert [float(v) for v in in_c.groups()] == list(chatter_monitor.JACOBI_VALIDATED_STEP.values())
