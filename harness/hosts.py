@@ -570,14 +570,16 @@ USER_NOTES = """## What a user of another FMI tool must know
 - **Step**: a host that delays every connection one step (Jacobi: nearly every engine) needs much smaller
   steps than our feedthrough-aware master for the same 1 % (3-5x for `vud`, up to 50x for `fixed`:
   docs/convergence.md): the controller FMU's DefaultExperiment stepSize (64 us) is safe on the pendulum, the
-  manipulator needs the step in the table below; `export-ssp` writes the right one into the SSP. Above it the
-  results drift by more than 1 %, and from about 0.4 ms on the pendulum chatters (ITAE 12x, Ec 85x) without
-  failing.
-- **Initial values**: the controller latches e(0), de(0) of the modified error (Remark 3) when initialisation
-  ends, from the inputs set by then: a host that does not propagate initial values must give the connected
-  inputs their consistent start values (`export-ssp` does), or the rows below without propagation are off.
-- **Warnings**: the FMU's log messages with status Warning say what to change; the matrix lists the ones each
-  host passed on."""
+  manipulator needs the step in the table below; `export-ssp` writes the right one into the SSP. Beyond it the
+  results drift by more than 1 %, and from about 0.4 ms the pendulum loop chatters (ITAE 12x, Ec 85x over 20 s)
+  without failing.
+- **Initial values**: with or without initial-value propagation the controller gets e(0), de(0) right: when the
+  inputs it saw at initialisation were placeholders it re-latches them from the first steps
+  (docs/host_robustness.md).
+- **Warnings** (switch the FMU's logging on: pythonfmu drops every message otherwise): "initial error
+  re-latched" = the host did not propagate initial values, the result is still right; "u chatters with
+  communication step" = the step is too large for the host's coupling, the result is wrong: use a smaller
+  step or a feedthrough-aware master. The matrix lists what each host passed on."""
 
 
 def steps_for_hosts(convergence: dict) -> list:
