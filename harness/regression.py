@@ -45,7 +45,7 @@ from . import scenario as scenarios
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE_DIR = Path(__file__).resolve().parent / "references"
-DEFAULT_REPORT_DIR = ROOT / "results" / "regression"
+DEFAULT_REPORT_DIR = Path("results") / "regression"  # in the working directory, like tables' results/
 SIGNALS = ("plant.y", "plant.dy", "controller.u", "controller.theta1", "controller.theta2", "controller.theta3",
            "controller.theta4", "reference.e", "reference.de")
 POINTS = 2001
@@ -492,7 +492,7 @@ def register(commands):
     regress_parser.add_argument("--update", action="store_true",
                                 help="rewrite the reference results from this run (the only way they change)")
     regress_parser.add_argument("--report", default=str(DEFAULT_REPORT_DIR),
-                                help="directory for report.md and the PNGs of failing signals")
+                                help="directory for report.md and the PNGs of failing signals (default results/regression)")
     regress_parser.add_argument("--workers", type=int, help="processes (default: every core)")
     regress_parser.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE",
                                 help="run with a parameter changed (e.g. controller.gamma=290: a mutation that "

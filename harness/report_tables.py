@@ -188,7 +188,7 @@ def figures(rows: list, out: Path) -> list:
 
 
 def choices_text() -> str:
-    return """The numbers depend on these choices of SPEC.md (the paper is ambiguous there):
+    return """The numbers depend on these choices (the paper is ambiguous there; all of them: docs/model.md, section 10):
 - Normalised FLS inputs saturated to the universe [-E_i, E_i]; sigmoid membership functions (slope 7 pendulum, 1.5 manipulator).
 - Modified tracking error E = e - (a0 + a1 t) exp(-5 t) (Remark 3) used by all three controllers, e(0), de(0) latched at the end of initialisation.
 - Comparison controllers are documented stand-ins with the same learning rate (gamma = 300): `fixed` (alpha = 1) for [46], `fae` (alpha = 1 plus w_hat, gamma_w = gamma) for [28]; the equations of [46] and [28] are not public here.
