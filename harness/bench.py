@@ -220,12 +220,14 @@ def bench_command(args) -> int:
 
 
 def register(commands):
+    from . import cli_args
+
     parser = commands.add_parser("bench", help="cost per step: ours vs fmpy SSP, Ecos, the FMI floor, the oracle")
-    parser.add_argument("--scenario", default="pendulum_case1")
+    parser.add_argument("--scenario", default="pendulum_case1", type=cli_args.scenario, help=cli_args.scenario_help())
     parser.add_argument("--controller", default="vud", choices=tuple(scenarios.CONTROLLER_VARIANTS))
-    parser.add_argument("--stop", type=float, default=2.0, help="simulated seconds per measurement")
-    parser.add_argument("--step", type=float, help="communication step (default: the scenario's)")
-    parser.add_argument("--repeat", type=int, default=3, help="measurements per figure; the best counts")
+    parser.add_argument("--stop", type=cli_args.positive_float, default=2.0, help="simulated seconds per measurement")
+    parser.add_argument("--step", type=cli_args.positive_float, help="communication step (default: the scenario's)")
+    parser.add_argument("--repeat", type=cli_args.positive_int, default=3, help="measurements per figure; the best counts")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.set_defaults(handler=bench_command)
 

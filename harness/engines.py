@@ -443,20 +443,22 @@ def run_ssp_command(args) -> int:
 
 
 def register(commands):
+    from . import cli_args
+
     run = commands.add_parser("run-ssp", help="run an exported SSP package in fmpy's SSP simulator or in Ecos")
-    run.add_argument("ssp", help="the .ssp file (python -m harness export-ssp ...)")
+    run.add_argument("ssp", type=cli_args.ssp_file, help="the .ssp file (python -m harness export-ssp ...)")
     run.add_argument("--engine", choices=("ecos", "fmpy"), default="ecos")
-    run.add_argument("--stop", type=float, help="stop time (default: the package's DefaultExperiment)")
-    run.add_argument("--step", type=float, help="communication step (default: the package's)")
+    run.add_argument("--stop", type=cli_args.positive_float, help="stop time (default: the package's DefaultExperiment)")
+    run.add_argument("--step", type=cli_args.positive_float, help="communication step (default: the package's)")
     run.add_argument("--out", help="write the result CSV here (time = the time the values belong to)")
     run.set_defaults(handler=run_ssp_command)
     compare = commands.add_parser("compare-engines", help="export a scenario and run it in our master (feedthrough, "
                                                           "jacobi), Ecos and fmpy's SSP simulator, side by side")
-    compare.add_argument("scenario")
+    compare.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
     compare.add_argument("--controller", choices=("vud", "fixed", "fae"), default="vud")
-    compare.add_argument("--stop", type=float, default=2.0, help="stop time (default 2 s)")
-    compare.add_argument("--step", type=float, help="communication step (default: the scenario's)")
-    compare.add_argument("--skip-steps", type=int, default=0,
+    compare.add_argument("--stop", type=cli_args.positive_float, default=2.0, help="stop time (default 2 s)")
+    compare.add_argument("--step", type=cli_args.positive_float, help="communication step (default: the scenario's)")
+    compare.add_argument("--skip-steps", type=cli_args.non_negative_int, default=0,
                          help="compare from t = start + N steps (fmpy's start transient lasts 2 steps)")
-    compare.add_argument("--workers", type=int, help="processes (default: every core)")
+    compare.add_argument("--workers", type=cli_args.positive_int, help="processes (default: every core)")
     compare.set_defaults(handler=compare_command)

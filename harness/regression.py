@@ -441,22 +441,17 @@ def regress(cases, update: bool = False, report_dir=DEFAULT_REPORT_DIR, toleranc
     return Outcome(comparisons, runs, report, written)
 
 
-def _parse_overrides(assignments) -> tuple:
-    overrides = []
-    for assignment in assignments or []:
-        dotted, sep, value = assignment.partition("=")
-        if not sep:
-            raise scenarios.ScenarioError(f"--set {assignment!r}: write INSTANCE.PARAMETER=VALUE")
-        overrides.append((dotted.strip(), float(value)))
-    return tuple(overrides)
-
-
 def regress_command(args) -> int:
+    from . import cli_args
+
     names = args.scenarios or scenarios.scenario_names()
+    overrides = tuple(args.set or ())
+    if args.update and overrides:
+        raise cli_args.UsageError("--update with --set: a mutated run never becomes a reference; drop one")
     for name in names:
-        scenarios.load(name)  # a clear error for an unknown name
+        cli_args.check_assignments(scenarios.load(name), overrides)
     tolerances = {key: getattr(args, key) for key in DEFAULT_TOLERANCES if getattr(args, key) is not None}
-    cases = all_cases(names, args.controller, _parse_overrides(args.set))
+    cases = all_cases(names, args.controller, overrides)
     print(f"running {len(cases)} case(s) on {min(len(cases), args.workers or os.cpu_count() or 1)} process(es)...",
           file=sys.stderr)
     wall = clock.perf_counter()
@@ -483,9 +478,11 @@ def regress_command(args) -> int:
 
 
 def register(commands):
+    from . import cli_args
+
     regress_parser = commands.add_parser(
         "regress", help="compare every case with its reference result inside a tolerance tube (pyfunnel)")
-    regress_parser.add_argument("scenarios", nargs="*", metavar="SCENARIO",
+    regress_parser.add_argument("scenarios", nargs="*", metavar="SCENARIO", type=cli_args.scenario,
                                 help=f"scenario names (default: all: {', '.join(scenarios.scenario_names())})")
     regress_parser.add_argument("--controller", nargs="+", choices=tuple(scenarios.CONTROLLER_VARIANTS),
                                 help="controllers (default: all)")
@@ -493,10 +490,11 @@ def register(commands):
                                 help="rewrite the reference results from this run (the only way they change)")
     regress_parser.add_argument("--report", default=str(DEFAULT_REPORT_DIR),
                                 help="directory for report.md and the PNGs of failing signals (default results/regression)")
-    regress_parser.add_argument("--workers", type=int, help="processes (default: every core)")
-    regress_parser.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE",
+    regress_parser.add_argument("--workers", type=cli_args.positive_int, help="processes (default: every core)")
+    regress_parser.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE", type=cli_args.assignment,
                                 help="run with a parameter changed (e.g. controller.gamma=290: a mutation that "
                                      "must fail); never allowed with --update")
     for key, value in DEFAULT_TOLERANCES.items():
-        regress_parser.add_argument(f"--{key}", type=float, help=f"pyfunnel tolerance {key} (default {value:g})")
+        regress_parser.add_argument(f"--{key}", type=cli_args.non_negative_float,
+                                    help=f"pyfunnel tolerance {key} (default {value:g})")
     regress_parser.set_defaults(handler=regress_command)

@@ -233,8 +233,16 @@ def report_markdown(rows: list, convergence: dict, figure_paths: list, wall_s: f
     return "\n".join(parts) + "\n"
 
 
+#: the figure the README shows; ``tables --apply`` copies it from the report into docs/
+README_FIGURE = "pendulum_case2.png"
+
+
 def tables_command(args) -> int:
+    from . import cli_args
+
     out = Path(args.out)
+    cli_args.refuse_tracked([out / name for name in ("table1.csv", "table2.csv", "report.md",
+                                                     *(f"{n}.png" for n in ALL_SCENARIOS))])
     out.mkdir(parents=True, exist_ok=True)
     jobs = args.jobs or default_jobs()
     # the longest runs first (the manipulator's step is 8x finer), so both cores finish together
@@ -248,6 +256,11 @@ def tables_command(args) -> int:
     convergence = load_convergence()
     for row in rows:
         row["largest_stable_step"] = largest_stable_step(convergence, row["scenario"], row["controller"])
+    if args.stop is not None and args.stop < 2 * math.pi:  # es1, es2: over the last reference period
+        print(f"warning: --stop {args.stop:g} < 2 pi: es1 and es2 (taken over the last reference period) "
+              "are left out as n/a", file=sys.stderr)
+        for row in rows:
+            row["es1_pct"] = row["es2_pct"] = None
     write_table(out / "table1.csv", [r for r in rows if r["scenario"] in PENDULUM])
     write_table(out / "table2.csv", [r for r in rows if r["scenario"] == "manipulator"])
     figure_paths = figures(rows, out)
@@ -264,6 +277,16 @@ def tables_command(args) -> int:
     failed = [r for r in rows if r["status"] != "ok"]
     for row in failed:
         print(f"error: {row['scenario']}/{row['controller']}: {row['reason']}", file=sys.stderr)
+    if args.apply:
+        if failed or args.stop is not None:
+            print("error: --apply refused: the docs show complete runs over the scenarios' horizon "
+                  "(no --stop, no failed run)", file=sys.stderr)
+            return 1
+        import shutil
+
+        target = ROOT / "docs" / README_FIGURE
+        shutil.copyfile(out / README_FIGURE, target)
+        print(f"applied: {target.relative_to(ROOT)} (the README's figure) from {out / README_FIGURE}")
     return 1 if failed else 0
 
 
@@ -432,10 +455,15 @@ def convergence_command(args) -> int:
 
 
 def register(commands):
+    from . import cli_args
+
     tables = commands.add_parser("tables", help="run Table I/II (12 co-simulations) and write the report")
-    tables.add_argument("--out", default="results", help="output folder (default results/)")
-    tables.add_argument("--jobs", type=int, help="parallel processes (default: every core)")
-    tables.add_argument("--stop", type=float, help="shorter horizon (tests); default the scenarios' 20 s")
+    tables.add_argument("--out", default="results", help="output folder (default results/, ignored by git)")
+    tables.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
+    tables.add_argument("--stop", type=cli_args.positive_float,
+                        help="shorter horizon (tests); default the scenarios' 20 s")
+    tables.add_argument("--apply", action="store_true",
+                        help=f"also copy the README's figure ({README_FIGURE}) into docs/ (full runs only)")
     tables.set_defaults(handler=tables_command)
     study = commands.add_parser("convergence", help="step-size study and largest stable steps")
     study.add_argument("scenarios", nargs="*", help=f"default: {', '.join(ALL_SCENARIOS)}")

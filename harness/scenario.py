@@ -139,7 +139,10 @@ def load(name_or_path) -> Scenario:
     if path.suffix != ".toml":
         path = SCENARIO_DIR / f"{name_or_path}.toml"
     if not path.exists():
-        raise ScenarioError(f"unknown scenario {str(name_or_path)!r}; valid: {', '.join(scenario_names())}")
+        if Path(name_or_path).suffix == ".toml":
+            raise ScenarioError(f"no such file: {name_or_path}")
+        raise ScenarioError(f"unknown scenario {str(name_or_path)!r}; valid: {', '.join(scenario_names())} "
+                            "or a .toml path")
     with open(path, "rb") as stream:
         try:
             data = tomllib.load(stream)

@@ -183,10 +183,12 @@ def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inp
 
 
 def export_command(args) -> int:
-    overrides = [(dotted, float(value)) for dotted, _, value in
-                 (assignment.partition("=") for assignment in args.set or [])]
+    from . import cli_args
+
+    overrides = list(args.set or [])
+    cli_args.check_assignments(scenarios.load(args.scenario), overrides)
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop, overrides)
-    out = args.out or f"{scenario.name}_{args.controller}.ssp"
+    out = args.out or str(Path("results") / f"{scenario.name}_{args.controller}.ssp")
     path = export_ssp(scenario, out, start_inputs=args.start_inputs)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB): {', '.join(scenario.components)}; "
           f"parameter set '{PARAMETER_SET}'"
@@ -195,14 +197,16 @@ def export_command(args) -> int:
 
 
 def register(commands):
+    from . import cli_args
+
     export = commands.add_parser("export-ssp", help="export a scenario as an SSP 1.0 package (SystemStructure.ssd, "
                                                     "parameter sets, FMUs)")
-    export.add_argument("scenario", help=f"scenario name ({', '.join(scenarios.scenario_names())}) or .toml path")
+    export.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
     export.add_argument("--controller", choices=tuple(scenarios.CONTROLLER_VARIANTS), default="vud")
-    export.add_argument("--out", help="the .ssp file to write (default: SCENARIO_CONTROLLER.ssp)")
-    export.add_argument("--step", type=float, help="communication step written to the package (default: the scenario's)")
-    export.add_argument("--stop", type=float, help="stop time of the default experiment (default: the scenario's)")
-    export.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE",
+    export.add_argument("--out", help="the .ssp file to write (default: results/SCENARIO_CONTROLLER.ssp)")
+    export.add_argument("--step", type=cli_args.positive_float, help="communication step written to the package (default: the scenario's)")
+    export.add_argument("--stop", type=cli_args.positive_float, help="stop time of the default experiment (default: the scenario's)")
+    export.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE", type=cli_args.assignment,
                         help="override a parameter value (repeatable), e.g. controller.gamma=290")
     export.add_argument("--start-inputs", action=argparse.BooleanOptionalAction, default=True,
                         help="also set the start values of the connected inputs to the consistent initial values "
