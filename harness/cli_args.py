@@ -171,6 +171,23 @@ def check_assignments(configured, assignments, fmu_paths: dict | None = None):
             valid = " and ".join(part for part in (f">= {low:g}" if low is not None else "",
                                                     f"<= {high:g}" if high is not None else "") if part)
             raise UsageError(f"--set {dotted}={value:g} is out of range; valid: {valid}")
+    if assignments:  # ranges the model description cannot state (e.g. gamma > 0): the FMUs say at initialisation
+        _initialise_once(configured, assignments, fmu_paths)
+
+
+def _initialise_once(configured, assignments, fmu_paths):
+    """Run one communication step with the new values; a parameter the FMU rejects is a usage error."""
+    from .master import SimulationFailed, simulate
+
+    trial = configured
+    for dotted, value in assignments:
+        trial = trial.with_parameter(dotted, value)
+    trial = trial.with_parameter("stop", trial.start + trial.step)
+    try:
+        simulate(trial, fmu_paths=fmu_paths)
+    except SimulationFailed as failure:
+        if exit_status(failure) == USAGE_EXIT:
+            raise UsageError(f"--set: {one_line(failure)}") from None
 
 
 # ------------------------------------------------------ committed files

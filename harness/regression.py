@@ -314,7 +314,10 @@ def plot_signal(path: Path, case: Case, comparison: SignalComparison, reference:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .units import variable_unit, with_unit
+
     name = comparison.signal
+    unit = variable_unit(scenarios.load(case.scenario), name)
     funnel = comparison.funnel or {}
     figure, (whole, zoom, excursion) = plt.subplots(3, 1, figsize=(9, 8), gridspec_kw={"height_ratios": [3, 3, 1.3]})
     for axis in (whole, zoom):
@@ -325,7 +328,7 @@ def plot_signal(path: Path, case: Case, comparison: SignalComparison, reference:
                               color="tab:gray", alpha=0.35, lw=0, label="tube")
         axis.plot(reference.time, reference.signals[name], color="k", lw=0.9, label="reference")
         axis.plot(run.time, run.signals[name], color="tab:red", lw=0.9, label="new result")
-        axis.set_ylabel(name)
+        axis.set_ylabel(with_unit(name, unit))
     centre = comparison.t_max_error if comparison.t_max_error is not None else float(reference.time[-1]) / 2
     half = 0.02 * float(reference.time[-1] - reference.time[0]) + 1e-9
     inside = (reference.time >= centre - half) & (reference.time <= centre + half)
@@ -341,8 +344,8 @@ def plot_signal(path: Path, case: Case, comparison: SignalComparison, reference:
     whole.legend(fontsize=8, loc="best")
     if "errors" in funnel:
         excursion.plot(funnel["errors"][:, 0], funnel["errors"][:, 1], color="tab:red", lw=0.8)
-    excursion.set_ylabel("outside tube")
-    excursion.set_xlabel("time [s]")
+    excursion.set_ylabel(with_unit("outside tube", unit))
+    excursion.set_xlabel("time (s)")
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)

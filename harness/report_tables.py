@@ -160,9 +160,18 @@ def figures(rows: list, out: Path) -> list:
                       key=lambda r: order[r["controller"]])
         if not runs:
             continue
+        from .units import variable_unit, with_unit
+
         fig, axes = plt.subplots(3, 2, figsize=(11, 9), sharex=True)
-        panels = [("x1 and ym (rad)", "plant.y"), ("x2 and dym (rad/s)", "plant.dy"), ("e (rad)", "reference.e"),
-                  ("de (rad/s)", "reference.de"), ("||e||", None), ("u", "controller.u")]
+        configured = scenarios.load(name)
+        unit = {dotted: variable_unit(configured, dotted) for dotted in
+                ("plant.y", "plant.dy", "reference.e", "reference.de", "controller.u")}
+        panels = [(with_unit("x1 and ym", unit["plant.y"]), "plant.y"),
+                  (with_unit("x2 and dym", unit["plant.dy"]), "plant.dy"),
+                  (with_unit("e", unit["reference.e"]), "reference.e"),
+                  (with_unit("de", unit["reference.de"]), "reference.de"),
+                  (with_unit("||e|| = sqrt(e^2 + de^2)", f"{unit['reference.e']}, {unit['reference.de']}"), None),
+                  (with_unit("u", unit["controller.u"]), "controller.u")]
         for axis, (title, signal) in zip(axes.flat, panels):
             for run in runs:
                 s = run["signals"]
@@ -174,6 +183,7 @@ def figures(rows: list, out: Path) -> list:
                 axis.plot(runs[0]["signals"]["time"], runs[0]["signals"]["reference.dym"], "k--", lw=0.8,
                           label="dym")
             axis.set_title(title, fontsize=10)
+            axis.set_ylabel(title.split(" (")[-1].rstrip(")") if " (" in title else "", fontsize=8)
             axis.grid(alpha=0.3)
         axes[0, 0].legend(fontsize=8)
         for axis in axes[-1]:

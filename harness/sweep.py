@@ -610,6 +610,11 @@ def plot_heatmap(plan: SweepPlan, rows: list, path) -> Path:
     import numpy as np
     from matplotlib.colors import LogNorm, Normalize
 
+    from .units import score_units, variable_unit, with_unit
+
+    def axis_label(name: str) -> str:  # step and stop in s, a parameter in its FMU's unit
+        return with_unit(name, "s" if name in SCENARIO_SETTINGS else variable_unit(plan.scenario, name))
+
     panels = [(c, *heatmap_arrays(plan, rows, c)) for c in plan.controllers]
     finite = np.concatenate([m[np.isfinite(m)] for _, m, _ in panels])
     positive = finite[finite > 0]
@@ -624,7 +629,7 @@ def plot_heatmap(plan: SweepPlan, rows: list, path) -> Path:
     gy = plan.grids[1] if len(plan.grids) > 1 else None
     ny, nx = panels[0][1].shape
     cell = max(0.3, min(0.6, 4.0 / max(nx, ny)))  # inches per cell
-    width = len(panels) * (nx * cell + 0.7) + 1.6
+    width = max(len(panels) * (nx * cell + 0.7) + 1.6, 6.0)  # room for the title over one small panel
     height = ny * cell + 1.7
     figure, axes = plt.subplots(1, len(panels), figsize=(width, height), squeeze=False, constrained_layout=True)
     cmap = matplotlib.colormaps["viridis"].with_extremes(bad="white")
@@ -651,11 +656,11 @@ def plot_heatmap(plan: SweepPlan, rows: list, path) -> Path:
         axis.set_title(f"{controller}: {ok}/{nx * ny} ok", fontsize=10)
         axis.set_xticks(range(nx), [f"{v:.3g}" for v in gx.values], fontsize=7,
                         rotation=45 if nx > 8 else 0)
-        axis.set_xlabel(gx.name)
+        axis.set_xlabel(axis_label(gx.name))
         if gy is not None:
             axis.set_yticks(range(ny), [f"{v:.3g}" for v in gy.values], fontsize=7)
             if axis is axes[0][0]:
-                axis.set_ylabel(gy.name)
+                axis.set_ylabel(axis_label(gy.name))
         else:
             axis.set_yticks([])
     rest = [g.name for g in plan.grids[2:]]
@@ -666,7 +671,8 @@ def plot_heatmap(plan: SweepPlan, rows: list, path) -> Path:
         title += f"\nworst case over {', '.join(rest)}"
     figure.suptitle(title, fontsize=10)
     if image is not None:
-        figure.colorbar(image, ax=axes[0].tolist(), shrink=0.9, label=plan.metric)
+        figure.colorbar(image, ax=axes[0].tolist(), shrink=0.9,
+                        label=with_unit(plan.metric, score_units(plan.scenario)[plan.metric]))
     path = Path(path)
     figure.savefig(path, dpi=90)
     plt.close(figure)
@@ -684,10 +690,15 @@ def sweep_command(args) -> int:
     out = Path(args.out) if args.out else Path("build") / "sweeps" / plan.scenario.name
     if args.jobs is not None and args.jobs < 1:
         raise ScenarioError(f"--jobs {args.jobs}: need at least 1")
+    from . import cli_args
+
+    cli_args.refuse_tracked([out / CSV_NAME, out / SETTINGS_NAME, out / f"heatmap_{plan.metric}.png"])
     total = len(plan.points())
+    fixed = ", ".join(f"{name} {getattr(plan.scenario, name):g} s" for name in SCENARIO_SETTINGS
+                      if name not in plan.names)  # a grid axis has no single value
     print(f"sweep {plan.scenario.name}: {' x '.join(f'{g.name} ({len(g)})' for g in plan.grids)} x "
-          f"{len(controllers)} controller{'s' if len(controllers) > 1 else ''} = {total} points, "
-          f"stop {plan.scenario.stop:g} s, step {plan.scenario.step:g} s -> {out}", file=sys.stderr)
+          f"{len(controllers)} controller{'s' if len(controllers) > 1 else ''} = {total} points"
+          + (f", {fixed}" if fixed else "") + f" -> {out}", file=sys.stderr)
     summary = run_sweep(plan, out, jobs=args.jobs, scheduler=args.scheduler,
                         progress=not args.no_progress and sys.stderr.isatty())
     print(f"{summary.computed} points computed ({summary.executor}) in {summary.wall_s:.1f} s, "
@@ -708,27 +719,48 @@ def sweep_command(args) -> int:
     if summary.lost:
         print(f"error: {summary.lost} point(s) not run, their worker was lost ({summary.lost_reason}); "
               "run the same command to retry them", file=sys.stderr)
+    if args.apply and not (summary.interrupted or summary.lost):
+        for path in apply_to_docs(plan, summary):
+            print(f"  applied  {path}")
     return 130 if summary.interrupted else 1 if summary.lost else 0
 
 
+def apply_to_docs(plan: SweepPlan, summary: SweepSummary) -> list:
+    """Copy the sweep's CSV and heat map into docs/ as docs/sweep_SCENARIO_AXES.csv and ..._METRIC.png."""
+    import shutil
+
+    root = Path(__file__).resolve().parents[1]
+    axes = "_".join(name.rpartition(".")[2].split("_")[0] for name in plan.names)  # plant.dist_gain -> dist
+    stem = root / "docs" / f"sweep_{plan.scenario.name}_{axes}"
+    written = [shutil.copyfile(summary.csv_path, stem.with_name(stem.name + ".csv"))]
+    if summary.heatmap_path:
+        written.append(shutil.copyfile(summary.heatmap_path, stem.with_name(f"{stem.name}_{plan.metric}.png")))
+    return [Path(path).relative_to(root) for path in written]
+
+
 def register(commands):
+    from . import cli_args
+
     sweep = commands.add_parser(
         "sweep", help="run a scenario over a grid of parameters (process pool or Dask) and draw heat maps",
         description="One co-simulation per point of the cartesian product of the grids, for each controller. "
                     "Rows stream to OUT/sweep.csv; rerun the same command to resume an interrupted sweep.")
-    sweep.add_argument("scenario", help=f"scenario name ({', '.join(scenarios.scenario_names())}) or .toml path")
+    sweep.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
     sweep.add_argument("--controller", choices=(*CONTROLLER_VARIANTS, "all"), default="vud")
     sweep.add_argument("--grid", action="append", required=True, metavar="NAME=START:STOP:N",
                        help="a grid axis: instance.parameter (e.g. plant.mp, controller.kappa1), step or stop; "
                             "N evenly spaced values from START to STOP, START:STOP:N:log for geometric spacing, "
                             "or V1,V2,... (repeat --grid for more axes; the heat map uses the first two)")
     sweep.add_argument("--metric", default="ITAE", choices=SCORE_KEYS, help="the score of the heat map (ITAE)")
-    sweep.add_argument("--stop", type=float, help="stop time in s (default: the scenario's)")
-    sweep.add_argument("--step", type=float, help="communication step in s (default: the scenario's)")
+    sweep.add_argument("--stop", type=cli_args.positive_float, help="stop time in s (default: the scenario's)")
+    sweep.add_argument("--step", type=cli_args.positive_float, help="communication step in s (default: the scenario's)")
     sweep.add_argument("--algorithm", choices=("feedthrough", "jacobi"), default="feedthrough")
-    sweep.add_argument("--out", help="output directory (default: build/sweeps/SCENARIO)")
+    sweep.add_argument("--out", help="output directory (default: build/sweeps/SCENARIO, ignored by git)")
+    sweep.add_argument("--apply", action="store_true",
+                       help="also copy the CSV and the heat map into docs/ as sweep_SCENARIO_AXES.csv and "
+                            "sweep_SCENARIO_AXES_METRIC.png (the README's examples)")
     where = sweep.add_mutually_exclusive_group()
-    where.add_argument("--jobs", type=int, help="local worker processes (default: every core)")
+    where.add_argument("--jobs", type=cli_args.positive_int, help="local worker processes (default: every core)")
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="run the points on this dask.distributed scheduler (e.g. tcp://host:8786)")
     sweep.add_argument("--no-progress", action="store_true",
