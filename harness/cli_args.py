@@ -137,7 +137,7 @@ def assignment(text: str) -> tuple:
     return dotted, _finite(value.strip(), f"a finite number for {dotted}")
 
 
-def check_assignments(configured, assignments, fmu_paths: dict | None = None):
+def check_assignments(configured, assignments, fmu_paths: dict | None = None, option: str = "--set"):
     """Check ``--set`` names and values against the scenario and the FMUs' model descriptions.
 
     Unknown instance, unknown or non-parameter variable, a fraction for an Integer, and a value
@@ -152,7 +152,7 @@ def check_assignments(configured, assignments, fmu_paths: dict | None = None):
     for dotted, value in assignments:
         instance, _, parameter = dotted.partition(".")
         if instance not in configured.components:
-            raise UsageError(f"--set {dotted}={value:g}: unknown instance {instance!r}; "
+            raise UsageError(f"{option} {dotted}={value:g}: unknown instance {instance!r}; "
                              f"valid: {', '.join(configured.components)}")
         if instance not in infos:
             spec = configured.components[instance]
@@ -161,21 +161,21 @@ def check_assignments(configured, assignments, fmu_paths: dict | None = None):
         parameters = [name for name, v in variables.items() if v.causality == "parameter"]
         found = variables.get(parameter)
         if found is None or found.causality != "parameter":
-            raise UsageError(f"--set {dotted}={value:g}: {instance} has no parameter {parameter!r}; "
+            raise UsageError(f"{option} {dotted}={value:g}: {instance} has no parameter {parameter!r}; "
                              f"valid: {', '.join(parameters)}")
         if found.type == "Integer" and value != int(value):
-            raise UsageError(f"--set {dotted}={value:g}: {parameter} is an Integer; give a whole number")
+            raise UsageError(f"{option} {dotted}={value:g}: {parameter} is an Integer; give a whole number")
         low = float(found.min) if found.min not in (None, "") else None
         high = float(found.max) if found.max not in (None, "") else None
         if (low is not None and value < low) or (high is not None and value > high):
             valid = " and ".join(part for part in (f">= {low:g}" if low is not None else "",
                                                     f"<= {high:g}" if high is not None else "") if part)
-            raise UsageError(f"--set {dotted}={value:g} is out of range; valid: {valid}")
+            raise UsageError(f"{option} {dotted}={value:g} is out of range; valid: {valid}")
     if assignments:  # ranges the model description cannot state (e.g. gamma > 0): the FMUs say at initialisation
-        _initialise_once(configured, assignments, fmu_paths)
+        _initialise_once(configured, assignments, fmu_paths, option)
 
 
-def _initialise_once(configured, assignments, fmu_paths):
+def _initialise_once(configured, assignments, fmu_paths, option):
     """Run one communication step with the new values; a parameter the FMU rejects is a usage error."""
     from .master import SimulationFailed, simulate
 
@@ -187,7 +187,7 @@ def _initialise_once(configured, assignments, fmu_paths):
         simulate(trial, fmu_paths=fmu_paths)
     except SimulationFailed as failure:
         if exit_status(failure) == USAGE_EXIT:
-            raise UsageError(f"--set: {one_line(failure)}") from None
+            raise UsageError(f"{option}: {one_line(failure)}") from None
 
 
 # ------------------------------------------------------ committed files

@@ -693,6 +693,10 @@ def sweep_command(args) -> int:
     from . import cli_args
 
     cli_args.refuse_tracked([out / CSV_NAME, out / SETTINGS_NAME, out / f"heatmap_{plan.metric}.png"])
+    parameters = [g for g in plan.grids if "." in g.name]
+    for pick in (min, max):  # valid ranges are intervals: the ends of each axis decide
+        cli_args.check_assignments(plan.scenario, [(g.name, pick(g.values)) for g in parameters],
+                                   plan_fmu_paths(plan), option="--grid")
     total = len(plan.points())
     fixed = ", ".join(f"{name} {getattr(plan.scenario, name):g} s" for name in SCENARIO_SETTINGS
                       if name not in plan.names)  # a grid axis has no single value
@@ -723,6 +727,11 @@ def sweep_command(args) -> int:
         for path in apply_to_docs(plan, summary):
             print(f"  applied  {path}")
     return 130 if summary.interrupted else 1 if summary.lost else 0
+
+
+def plan_fmu_paths(plan: SweepPlan) -> dict:
+    """{model identifier or file: path} of the plan's FMUs, as ``resolve_fmu`` takes them."""
+    return {plan.scenario.components[instance].fmu: path for instance, path in plan.fmu_files.items()}
 
 
 def apply_to_docs(plan: SweepPlan, summary: SweepSummary) -> list:
