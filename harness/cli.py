@@ -44,6 +44,8 @@ def run_command(args) -> int:
     summary = {"scenario": scenario.name, "controller": args.controller, "step": scenario.step,
                **scores, "wall_s": result.wall_s, "us_per_step": result.us_per_step}
     if args.json:
+        if cli_args.short_horizon_note(scenario):
+            summary["warnings"] = [f"es1_pct, es2_pct{cli_args.short_horizon_note(scenario)}"]
         print(json.dumps(summary))
     else:
         print(f"{scenario.name} / {args.controller} ({args.algorithm}), step {scenario.step:g} s, "

@@ -245,6 +245,7 @@ def report_markdown(rows: list, convergence: dict, figure_paths: list, wall_s: f
 
 #: the figure the README shows; ``tables --apply`` copies it from the report into docs/
 README_FIGURE = "pendulum_case2.png"
+DOCS_DIR = ROOT / "docs"
 
 
 def tables_command(args) -> int:
@@ -294,9 +295,9 @@ def tables_command(args) -> int:
             return 1
         import shutil
 
-        target = ROOT / "docs" / README_FIGURE
+        target = DOCS_DIR / README_FIGURE
         shutil.copyfile(out / README_FIGURE, target)
-        print(f"applied: {target.relative_to(ROOT)} (the README's figure) from {out / README_FIGURE}")
+        print(f"applied: {target} (the README's figure) from {out / README_FIGURE}")
     return 1 if failed else 0
 
 

@@ -46,6 +46,7 @@ TRAILING_COLUMNS = (*SCORE_KEYS, "wall_s", "status", "reason")
 SCENARIO_SETTINGS = ("step", "stop")  # sweepable scenario settings besides instance parameters
 KEY_DIGITS = 12  # grid values match on resume when equal to 12 significant digits
 SCHEDULER_TIMEOUT = "20s"  # how long to try reaching a Dask scheduler
+DOCS_DIR = Path(__file__).resolve().parents[1] / "docs"  # where --apply copies a sweep's CSV and heat map
 
 
 # ------------------------------------------------------------------ grids
@@ -697,6 +698,10 @@ def sweep_command(args) -> int:
     for pick in (min, max):  # valid ranges are intervals: the ends of each axis decide
         cli_args.check_assignments(plan.scenario, [(g.name, pick(g.values)) for g in parameters],
                                    plan_fmu_paths(plan), option="--grid")
+    shortest = min(plan.grids[plan.names.index("stop")].values) if "stop" in plan.names else plan.scenario.stop
+    if shortest - plan.scenario.start < 2 * math.pi:
+        print(f"warning: stop {shortest:g} s < 2 pi: es1_pct and es2_pct (over the last reference period) "
+              "mean nothing in these rows", file=sys.stderr)
     total = len(plan.points())
     fixed = ", ".join(f"{name} {getattr(plan.scenario, name):g} s" for name in SCENARIO_SETTINGS
                       if name not in plan.names)  # a grid axis has no single value
@@ -738,13 +743,12 @@ def apply_to_docs(plan: SweepPlan, summary: SweepSummary) -> list:
     """Copy the sweep's CSV and heat map into docs/ as docs/sweep_SCENARIO_AXES.csv and ..._METRIC.png."""
     import shutil
 
-    root = Path(__file__).resolve().parents[1]
     axes = "_".join(name.rpartition(".")[2].split("_")[0] for name in plan.names)  # plant.dist_gain -> dist
-    stem = root / "docs" / f"sweep_{plan.scenario.name}_{axes}"
+    stem = DOCS_DIR / f"sweep_{plan.scenario.name}_{axes}"
     written = [shutil.copyfile(summary.csv_path, stem.with_name(stem.name + ".csv"))]
     if summary.heatmap_path:
         written.append(shutil.copyfile(summary.heatmap_path, stem.with_name(f"{stem.name}_{plan.metric}.png")))
-    return [Path(path).relative_to(root) for path in written]
+    return [Path(path) for path in written]
 
 
 def register(commands):

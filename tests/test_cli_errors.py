@@ -217,3 +217,29 @@ def test_the_last_resort_handler_turns_any_exception_into_one_line(monkeypatch, 
     assert cli.main(["run", "pendulum_case1"]) == 1
     line = _one_error_line(capsys.readouterr().err)
     assert "something internal" in line and "with a second line" in line
+
+
+# ------------------------------------------------ warnings, --apply, outputs
+def test_es1_es2_are_marked_n_a_on_a_horizon_shorter_than_the_reference_period(fmu_paths, capsys):
+    assert cli.main(["run", "pendulum_case1", "--stop", "0.5"]) == 0
+    short = capsys.readouterr().out
+    assert "es1_pct  n/a (stop < 2 pi" in short and "es2_pct  n/a (stop < 2 pi" in short
+    assert cli.main(["run", "pendulum_case1", "--stop", "6.4", "--step", "1e-3"]) == 0
+    long = capsys.readouterr().out
+    assert "n/a" not in long and float(long.split("es1_pct")[1].split()[0]) > 0
+
+
+def test_sweep_writes_docs_only_with_apply_and_says_what_it_changed(fmu_paths, tmp_path, monkeypatch, capsys):
+    from harness import sweep
+
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    monkeypatch.setattr(sweep, "DOCS_DIR", docs)
+    command = ["sweep", "pendulum_case1", "--grid", "plant.mp=0.1,0.2", "--stop", "0.05", "--jobs", "1",
+               "--out", str(tmp_path / "out")]
+    assert cli.main(command) == 0
+    assert list(docs.iterdir()) == [] and (tmp_path / "out" / "sweep.csv").exists()
+    assert cli.main([*command, "--apply"]) == 0
+    out = capsys.readouterr().out
+    assert sorted(p.name for p in docs.iterdir()) == ["sweep_pendulum_case1_mp.csv", "sweep_pendulum_case1_mp_ITAE.png"]
+    assert f"applied  {docs / 'sweep_pendulum_case1_mp.csv'}" in out
