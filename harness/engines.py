@@ -157,13 +157,15 @@ def read_package(path) -> Package:
 
 
 def _experiment(package: Package, stop, step) -> tuple[float, float, float, int]:
+    from .cli_args import UsageError  # a ValueError: an experiment the package cannot run
+
     stop = package.stop if stop is None else float(stop)
     step = package.step if step is None else float(step)
     if stop is None or step is None:
-        raise ValueError(f"{package.path.name}: give stop and step (the package has no default for them)")
+        raise UsageError(f"{package.path.name}: give --stop and --step (the package has no default for them)")
     steps = round((stop - package.start) / step)
     if steps < 1:
-        raise ValueError(f"stop - start = {stop - package.start} is shorter than one step {step}")
+        raise UsageError(f"stop - start = {stop - package.start} is shorter than one step {step}")
     return package.start, stop, step, steps
 
 

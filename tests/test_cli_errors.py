@@ -44,6 +44,15 @@ def files(tmp_path_factory):
             "text": str(folder / "notes.txt"), "folder": str(folder)}
 
 
+@pytest.fixture(scope="module")
+def real_ssp(fmu_paths, tmp_path_factory):
+    from harness import scenario as scenarios
+    from harness.ssp import export_ssp
+
+    configured = scenarios.configure("pendulum_case1", "vud", stop=0.1)
+    return str(export_ssp(configured, tmp_path_factory.mktemp("ssp") / "p.ssp", fmu_paths=fmu_paths))
+
+
 def _positional_value(action, files) -> str | None:
     """A valid value for a positional argument, from its type (None: cannot be made up)."""
     if action.nargs in ("*", "?"):
@@ -184,6 +193,9 @@ COMMAND_CASES = [
     ("export-ssp: unknown instance", ["export-ssp", "pendulum_case1", "--set", "nope.gamma=1",
                                       "--out", "{folder}/x.ssp"], 2, "unknown instance"),
     ("export-ssp: bad TOML content", ["export-ssp", "{bad_toml}", "--out", "{folder}/x.ssp"], 2, "is not valid TOML"),
+    ("run-ssp: stop shorter than one step", ["run-ssp", "{real_ssp}", "--stop", "1e-9"], 2, "shorter than one step"),
+    ("run-ssp: step longer than the run", ["run-ssp", "{real_ssp}", "--engine", "fmpy", "--step", "5", "--stop", "0.1"],
+     2, "shorter than one step"),
     ("compare-engines: bad TOML content", ["compare-engines", "{bad_toml}"], 2, "is not valid TOML"),
     ("bench: bad TOML content", ["bench", "--scenario", "{bad_toml}"], 2, "is not valid TOML"),
 ]
@@ -191,8 +203,8 @@ COMMAND_CASES = [
 
 @pytest.mark.parametrize("case_id,argv,status,expected", COMMAND_CASES, ids=[c[0] for c in COMMAND_CASES])
 def test_mistakes_a_command_finds_are_one_line_with_the_right_status(case_id, argv, status, expected, files,
-                                                                     fmu_paths, capsys):
-    code = cli.main([part.format(**files) for part in argv])
+                                                                     real_ssp, capsys):
+    code = cli.main([part.format(**files, real_ssp=real_ssp) for part in argv])
     captured = capsys.readouterr()
     assert "Traceback" not in captured.out + captured.err
     line = _one_error_line(captured.err)
