@@ -68,3 +68,14 @@ def test_readme_starts_with_the_two_commands():
     assert commands[0].startswith("pip install -e . && python -m harness tables")
     assert commands[1].startswith("pip install -e '.[test]' && python -m pytest")
     assert "pip install -e '.[test]' && python -m pytest -q" in (ROOT / ".ci" / "run").read_text()
+
+
+def test_model_doc_scenario_table_matches_the_scenario_files():
+    from harness import scenario as scenarios
+
+    rows = re.findall(r"(?m)^\| `(\w+)` \| [^|]+ \| [^|]+ \| ([0-9.e-]+) \| [^|]+ \|$", MODEL.read_text())
+    assert sorted(name for name, _ in rows) == scenarios.scenario_names()
+    for name, step in rows:
+        configured = scenarios.load(name)
+        assert float(step) == configured.step, f"docs/model.md: {name} step {step}, scenario file {configured.step}"
+        assert configured.start == 0.0 and configured.stop == 20.0  # "All run from 0 to 20 s"
