@@ -70,8 +70,9 @@ def test_run_json_prints_exactly_one_object_with_the_keys(fmu_paths, capsys):
     assert len(out) == 1
     summary = json.loads(out[0])
     assert list(summary) == ["scenario", "controller", "step", "ts", "es1_pct", "es2_pct", "ITAE", "IAE",
-                             "Ec", "umax", "tv_u", "wall_s", "us_per_step"]
+                             "Ec", "umax", "tv_u", "wall_s", "us_per_step", "warnings"]
     assert summary["scenario"] == "pendulum_case1" and summary["controller"] == "fae"
+    assert summary["warnings"][0].startswith("es1_pct, es2_pct (stop < 2 pi")  # 0.2 s: no reference period
 
 
 def test_console_script_and_module_entry_point_run():
