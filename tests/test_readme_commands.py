@@ -25,6 +25,7 @@ How README blocks are run (keep to this when adding a section):
     files: PATH ...           these files exist afterwards (relative to the working directory)
     output: TEXT              the block's output contains TEXT (repeatable)
     output-re: REGEX          the block's output matches REGEX (repeatable)
+    requires: PROGRAM ...     skip the block (saying so) when a program is not on PATH (e.g. cc)
     timeout: SECONDS          default 300
     -->
 
@@ -62,6 +63,7 @@ class Block:
     files: list = field(default_factory=list)
     outputs: list = field(default_factory=list)
     patterns: list = field(default_factory=list)
+    requires: list = field(default_factory=list)
     timeout: float = 300.0
 
     @property
@@ -96,6 +98,8 @@ def _directives(comment: str, block: Block):
             block.outputs.append(value)
         elif key == "output-re":
             block.patterns.append(value)
+        elif key == "requires":
+            block.requires += value.split()
         elif key == "timeout":
             block.timeout = float(value)
         else:
@@ -283,6 +287,9 @@ def _environment(work: Path) -> dict:
 def test_readme_block_runs_as_written(block, workspace, tmp_path):
     if block.skip:
         pytest.skip(f"{block.name}: {block.skip}")
+    missing = [program for program in block.requires if shutil.which(program) is None]
+    if missing:
+        pytest.skip(f"{block.name}: needs {', '.join(missing)} on PATH")
     before = _written_files(workspace)
     logs = tmp_path / "logs"
     logs.mkdir()
