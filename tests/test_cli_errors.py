@@ -197,6 +197,7 @@ COMMAND_CASES = [
     ("run-ssp: step longer than the run", ["run-ssp", "{real_ssp}", "--engine", "fmpy", "--step", "5", "--stop", "0.1"],
      2, "shorter than one step"),
     ("compare-engines: bad TOML content", ["compare-engines", "{bad_toml}"], 2, "is not valid TOML"),
+    ("mutate: unknown mutation", ["mutate", "--only", "no_such_mutation", "--list"], 2, "unknown mutation"),
     ("bench: bad TOML content", ["bench", "--scenario", "{bad_toml}"], 2, "is not valid TOML"),
 ]
 
