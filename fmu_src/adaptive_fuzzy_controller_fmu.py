@@ -10,10 +10,16 @@ Co-simulation semantics:
 * doStep(t, h) advances theta (and w_hat for variant 3) over the step with
   the inputs held at their values at t: the sampled-data update
   ``theta += h * dtheta(t)`` (explicit Euler) that an embedded target runs.
-* e(0), de(0) of the modified error (Remark 3) are latched when
-  initialisation ends, from the inputs set by then.
+* e(0), de(0), ..., e^(n-1)(0) of the modified error (Remark 3, (36)) are
+  latched when initialisation ends, from the inputs set by then
+  (``_latch_initial_error``).
+* order n and sets m (Integer parameters, appended to the table) make it the
+  controller of an nth-order plant with m fuzzy sets per input: wire e, de,
+  ..., e^(n-1) (and ym, ..., ym^(n-1) for fls_input = 2); M = m^n rule
+  weights theta1..thetaM; docs/general_order.md.
 """
 import math
+from operator import itemgetter
 
 import afc_math
 # pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
@@ -23,7 +29,8 @@ from afc_slave_base import TableSlave as Fmi2Slave
 
 DIMENSIONLESS = ""
 _INF = math.inf
-FEEDTHROUGH = ("e", "de", "ym", "dym")
+# u depends on every error and reference input: n is a parameter (ym.. with fls_input = 2)
+FEEDTHROUGH = ("e", "de", "ym", "dym", "d2e", "d3e", "d2ym", "d3ym")
 
 VARIABLES = (
     Variable("variant", PARAMETER, 1, kind="Integer", minimum=1, maximum=3,
@@ -57,76 +64,174 @@ VARIABLES = (
     Variable("E", OUTPUT, 0.0, description="modified tracking error E (Remark 3)", depends_on=("e", "de")),
     Variable("dE", OUTPUT, 0.0, description="its time derivative dE", depends_on=("e", "de")),
     Variable("alpha1", OUTPUT, 1.0, description="contraction-expansion factor of input 1 (23)",
-             depends_on=FEEDTHROUGH),
+             depends_on=("e", "de", "ym", "dym")),
     Variable("alpha2", OUTPUT, 1.0, description="contraction-expansion factor of input 2 (23)",
-             depends_on=FEEDTHROUGH),
+             depends_on=("e", "de", "ym", "dym")),
     Variable("theta1", OUTPUT, 0.0, description="rule weight theta_1 (rule (1,1))"),
     Variable("theta2", OUTPUT, 0.0, description="rule weight theta_2 (rule (1,2))"),
     Variable("theta3", OUTPUT, 0.0, description="rule weight theta_3 (rule (2,1))"),
     Variable("theta4", OUTPUT, 0.0, description="rule weight theta_4 (rule (2,2))"),
     Variable("w_hat", OUTPUT, 0.0, description="approximation-error estimate (variant 3; else 0)"),
+    # ---- the general controller (order n, m sets per input): appended rows, so the value
+    # references above keep their numbers; entries beyond n are unused but validated
+    Variable("order", PARAMETER, 2, kind="Integer", minimum=1, maximum=afc_math.ORDER_MAX,
+             description="plant order n: FLS inputs [E, dE, ..., E^(n-1)], M = sets^order rules"),
+    Variable("sets", PARAMETER, 2, kind="Integer", minimum=2, maximum=afc_math.SETS_MAX,
+             description=f"fuzzy sets m per FLS input (sets^order <= {afc_math.RULES_MAX})"),
+    positive("k3", 0.5, description="Hurwitz gain k3 of s^n + k1 s^(n-1) + ... + kn (n >= 3); "
+                                    "0.5 keeps s^3 + 2 s^2 + s + 0.5 Hurwitz with the default k1, k2"),
+    positive("k4", 0.1, description="Hurwitz gain k4 (n = 4); 0.1 keeps s^4 + 2 s^3 + s^2 + 0.5 s + 0.1 "
+                                    "Hurwitz with the default k1..k3"),
+    positive("q3", 10.0, description="Q = diag(q1, ..., qn) of (30) (n >= 3); 10 as q1, q2"),
+    positive("q4", 10.0, description="Q = diag(q1, ..., qn) of (30) (n = 4); 10 as q1, q2"),
+    positive("kappa3", 10.0, description="contraction-expansion width kappa_3 (23) (n >= 3); 10 as kappa1, 2"),
+    positive("kappa4", 10.0, description="contraction-expansion width kappa_4 (23) (n = 4); 10 as kappa1, 2"),
+    positive("E3", math.pi / 3, description="universe [-E3, E3] of FLS input 3 (n >= 3); as E1, E2"),
+    positive("E4", math.pi / 3, description="universe [-E4, E4] of FLS input 4 (n = 4); as E1, E2"),
+    Variable("d2e", INPUT, 0.0, description="tracking error acceleration d2e = d2ym - d2y (n >= 3)"),
+    Variable("d3e", INPUT, 0.0, description="third derivative of the tracking error d3e (n = 4)"),
+    Variable("d2ym", INPUT, 0.0, description="reference acceleration d2ym (fls_input = 2, n >= 3)"),
+    Variable("d3ym", INPUT, 0.0, description="third derivative of the reference d3ym (fls_input = 2, n = 4)"),
+    Variable("d2E", OUTPUT, 0.0, description="second derivative of the modified error (36) (n >= 3; else 0)",
+             depends_on=("d2e",)),
+    Variable("d3E", OUTPUT, 0.0, description="third derivative of the modified error (36) (n = 4; else 0)",
+             depends_on=("d3e",)),
+    Variable("alpha3", OUTPUT, 1.0, description="contraction-expansion factor of input 3 (23) (n >= 3; else 1)",
+             depends_on=("d2e", "d2ym")),
+    Variable("alpha4", OUTPUT, 1.0, description="contraction-expansion factor of input 4 (23) (n = 4; else 1)",
+             depends_on=("d3e", "d3ym")),
+    *(Variable(f"theta{j}", OUTPUT, 0.0, description=f"rule weight theta_{j} (0 when {j} > sets^order)")
+      for j in range(5, afc_math.RULES_MAX + 1)),
 )
+ERROR_INPUTS = ("e", "de", "d2e", "d3e")  # e^(i), i = 0..3
+REFERENCE_INPUTS = ("ym", "dym", "d2ym", "d3ym")
+ERROR_OUTPUTS = ("E", "dE", "d2E", "d3E")
+ALPHA_OUTPUTS = ("alpha1", "alpha2", "alpha3", "alpha4")
+THETA_OUTPUTS = tuple(f"theta{j}" for j in range(1, afc_math.RULES_MAX + 1))
+
+
+def _vector_getter(names):
+    """d -> (d[names[0]], ...) as a tuple, also for one name."""
+    if len(names) == 1:
+        return lambda attributes, name=names[0]: (attributes[name],)
+    return itemgetter(*names)
+
 
 
 class AdaptiveFuzzyController(Fmi2Slave):
     VARIABLES = VARIABLES
-    STATE_ATTRIBUTES = ("e0", "de0", "p12", "p22", "xi")
+    STATE_ATTRIBUTES = ("error0", "latch_time", "theta", "xi", "modified")
     MODEL_DESCRIPTION = ("Direct adaptive fuzzy controller with variable universes of discourse "
                          "(Pan, Er, Huang, Wang, IEEE TFS 2011)")
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.e0 = self.de0 = 0.0
-        self.p12 = self.p22 = 0.0
-        self.xi = [0.25, 0.25, 0.25, 0.25]
+        self.error0 = (0.0, 0.0)
+        self.latch_time = 0.0
+        self.theta = [0.0] * afc_math.RULE_COUNT
+        self.xi = (0.25, 0.25, 0.25, 0.25)
+        self.modified = (0.0, 0.0)
+        self._p = None
+
+    def cross_parameter_errors(self):
+        n, m = self.order, self.sets
+        if m ** n > afc_math.RULES_MAX:
+            return [f"parameters order = {n}, sets = {m} give m^n = {m ** n} rules, above the bound "
+                    f"{afc_math.RULES_MAX}; valid: sets^order <= {afc_math.RULES_MAX} "
+                    f"(every sets 2..{afc_math.SETS_MAX} up to order 3, sets <= 3 at order 4)"]
+        k = tuple(getattr(self, f"k{i}") for i in range(1, n + 1))
+        q = tuple(getattr(self, f"q{i}") for i in range(1, n + 1))
+        try:
+            hurwitz = afc_math.is_positive_definite(afc_math.lyapunov_p(k, q))
+        except ValueError:
+            hurwitz = False
+        if not hurwitz:
+            polynomial = " + ".join([f"s^{n}"] + [f"{k[i - 1]!r} s^{n - i}" if n - i else f"{k[i - 1]!r}"
+                                                  for i in range(1, n + 1)])
+            return [f"parameters k1..k{n} = {k!r} are invalid for order = {n}: {polynomial} is not Hurwitz "
+                    "(no positive definite P in (30)); valid: k with every root of the polynomial in the "
+                    f"left half-plane, e.g. the coefficients of (s + 1)^{n}"]
+        return []
+
+    def _configure(self):
+        """The constants of the per-step path (afc_math.controller_parameters, P B, boundaries,
+        the inputs and outputs in use) from the current parameters and latch."""
+        n = self.order
+        self._p = afc_math.controller_parameters(
+            {v.name: getattr(self, v.name) for v in VARIABLES if v.causality == PARAMETER},
+            self.error0, self.latch_time)
+        self._error_inputs = ERROR_INPUTS[:n]
+        self._error_vector = _vector_getter(ERROR_INPUTS[:n])
+        self._reference_vector = _vector_getter(REFERENCE_INPUTS[:n])
+        self._error_outputs = ERROR_OUTPUTS[:n]
+        self._alpha_outputs = ALPHA_OUTPUTS[:n]
+        self._theta_outputs = THETA_OUTPUTS[:self._p["rules"]]
+        self._p_b = self._p["p_b"]
+        self._default_shape = n == 2 and self.sets == 2
+
+    def _latch_initial_error(self, time):
+        """Latch e(t0), de(t0), ..., e^(n-1)(t0) and t0 = time for the modified error (36)."""
+        self.error0 = tuple(getattr(self, name) for name in self._error_inputs)
+        self.latch_time = time
+        afc_math.latch_error(self._p, self.error0, time)
 
     def initialize(self, start_time):
-        _, self.p12, self.p22 = afc_math.lyapunov_p(self.k1, self.k2, self.q1, self.q2)
-        self.e0, self.de0 = self.e, self.de  # latched once (Remark 3)
-        self.theta1 = self.theta2 = self.theta3 = self.theta4 = float(self.theta0)
+        self._configure()
+        self._latch_initial_error(start_time)  # once (Remark 3)
+        rules, n = self._p["rules"], self.order
+        self.theta = [float(self.theta0)] * rules
+        attributes = self.__dict__
+        attributes.update(zip(self._theta_outputs, self.theta))
+        attributes.update(dict.fromkeys(THETA_OUTPUTS[rules:], 0.0))
+        attributes.update(dict.fromkeys(ERROR_OUTPUTS[n:], 0.0))
+        attributes.update(dict.fromkeys(ALPHA_OUTPUTS[n:], 1.0))
         self.w_hat = 0.0
 
+    def _set_fmu_state(self, state):
+        super()._set_fmu_state(state)
+        if self.initialized:  # the constants follow the restored parameters and latch
+            self._configure()
+
     def compute_outputs(self):
-        lambda_e = self.lambda_e
-        e, de = self.e, self.de
-        error, error_rate = afc_math.modified_error(
-            e, de, self.time - self.start_time, self.e0, self.de0, lambda_e)
-        x1, x2 = afc_math.fls_inputs(e, de, self.ym, self.dym, error, error_rate, self.fls_input)
-        variant = self.variant
-        if variant == afc_math.VARIANT_VUD:
-            alpha1 = afc_math.contraction_factor(x1, self.lambda_ce, self.kappa1)
-            alpha2 = afc_math.contraction_factor(x2, self.lambda_ce, self.kappa2)
+        attributes = self.__dict__
+        error = self._error_vector(attributes)
+        reference = self._reference_vector(attributes)
+        u, modified, alpha, xi = afc_math.controller_output(error, reference, self.time, self.theta,
+                                                            self.w_hat, self._p)
+        if not -_INF < u + sum(modified) < _INF:  # u or some E^(i) is NaN or inf (or all overflow together)
+            self._overflow(u, modified, error)
+        self.u = u
+        if self._default_shape:  # n = 2, m = 2 unrolled: the per-step path
+            self.E, self.dE = modified
+            self.alpha1, self.alpha2 = alpha
         else:
-            alpha1 = alpha2 = 1.0
-        xi = afc_math.fuzzy_basis(afc_math.normalized_input(x1, alpha1, self.E1),
-                                  afc_math.normalized_input(x2, alpha2, self.E2), self.mf_slope)
-        u = self.theta1 * xi[0] + self.theta2 * xi[1] + self.theta3 * xi[2] + self.theta4 * xi[3]
-        if variant == afc_math.VARIANT_FAE:
-            u += self.w_hat
-        if not (-_INF < u < _INF and -_INF < error < _INF and -_INF < error_rate < _INF):  # also NaN
-            self.fail(f"outputs overflow at t = {self.time!r}: u = {u!r}, E = {error!r}, dE = {error_rate!r} "
-                      f"from e = {e!r}, de = {de!r} (latched e(0) = {self.e0!r}, de(0) = {self.de0!r}); "
-                      "the inputs are out of range or the closed loop diverged")
-        self.u, self.E, self.dE, self.alpha1, self.alpha2 = u, error, error_rate, alpha1, alpha2
+            attributes.update(zip(self._error_outputs, modified))
+            attributes.update(zip(self._alpha_outputs, alpha))
+        self.modified = modified
         self.xi = xi  # a tuple; the FMU state stores it as a list
         self.outputs_stale = False
 
+    def _overflow(self, u, modified, error):
+        self.fail(f"outputs overflow at t = {self.time!r}: u = {u!r}, E = {modified!r} from "
+                  f"{', '.join(f'{name} = {value!r}' for name, value in zip(self._error_inputs, error))} "
+                  f"(latched at t0 = {self.latch_time!r}: {self.error0!r}); "
+                  "the inputs are out of range or the closed loop diverged")
+
     def step(self, current_time, step_size):
-        tau = afc_math.adaptation_signal(self.E, self.dE, self.p12, self.p22)
-        gamma, m_theta, delta = self.gamma, self.m_theta, self.delta
-        rate = afc_math.projected_rate
-        xi = self.xi
-        theta1 = self.theta1 + step_size * rate(self.theta1, tau, xi[0], gamma, m_theta, delta)
-        theta2 = self.theta2 + step_size * rate(self.theta2, tau, xi[1], gamma, m_theta, delta)
-        theta3 = self.theta3 + step_size * rate(self.theta3, tau, xi[2], gamma, m_theta, delta)
-        theta4 = self.theta4 + step_size * rate(self.theta4, tau, xi[3], gamma, m_theta, delta)
+        tau = afc_math.adaptation_signal(self.modified, self._p_b)
+        theta = afc_math.adapted_weights(self.theta, tau, self.xi, self.gamma, self.m_theta, self.delta,
+                                         step_size)
         w_hat = self.w_hat
         if self.variant == afc_math.VARIANT_FAE:
             w_hat += step_size * self.gamma_w * tau
-        if not (-_INF < theta1 < _INF and -_INF < theta2 < _INF and -_INF < theta3 < _INF
-                and -_INF < theta4 < _INF and -_INF < w_hat < _INF):  # also False for NaN
+        if not -_INF < w_hat + sum(theta) < _INF:  # some theta or w_hat is NaN or inf (or all overflow together)
             self.fail(f"adaptation diverged in doStep(t={current_time!r}, h={step_size!r}): tau = {tau!r} "
-                      f"from E = {self.E!r}, dE = {self.dE!r}; theta and w_hat keep their values at t; "
+                      f"from E = {self.modified!r}; theta and w_hat keep their values at t; "
                       "the inputs are out of range or the closed loop diverged")
-        self.theta1, self.theta2, self.theta3, self.theta4, self.w_hat = theta1, theta2, theta3, theta4, w_hat
+        self.theta = theta
+        if self._default_shape:  # n = 2, m = 2 unrolled: the per-step path
+            self.theta1, self.theta2, self.theta3, self.theta4 = theta
+        else:
+            self.__dict__.update(zip(self._theta_outputs, theta))
+        self.w_hat = w_hat
         return True
