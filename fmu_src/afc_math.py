@@ -305,14 +305,13 @@ def adapted_weights(theta, tau: float, xi, gamma: float, m_theta: float, delta: 
                     step_size: float) -> list:
     """theta_j + h dtheta_j for every rule j: the sampled-data (explicit Euler) step of [31].
 
-    dtheta_j = projected_rate(theta_j, tau, xi_j, ...); while every |theta_j| <= M_theta
-    the projection is inactive and dtheta_j = gamma tau xi_j (the same arithmetic).
+    dtheta_j = projected_rate(theta_j, tau, xi_j, ...); where |theta_j| <= M_theta the
+    projection is inactive and dtheta_j = gamma tau xi_j (the same arithmetic, inline).
     """
-    if max(theta) <= m_theta and min(theta) >= -m_theta:
-        rate = gamma * tau
-        return [value + step_size * (rate * basis) for value, basis in zip(theta, xi)]
-    rates = map(projected_rate, theta, repeat(tau), xi, repeat(gamma), repeat(m_theta), repeat(delta))
-    return [value + step_size * rate for value, rate in zip(theta, rates)]
+    rate = gamma * tau
+    return [value + step_size * (rate * basis) if -m_theta <= value <= m_theta
+            else value + step_size * projected_rate(value, tau, basis, gamma, m_theta, delta)
+            for value, basis in zip(theta, xi)]
 
 
 # ------------------------------------------------------- control law  [9]
@@ -390,9 +389,12 @@ def controller_output(error, reference, t, theta, w_hat, p) -> tuple:
         alpha = p["unit_alpha"]
     z = normalized_inputs(x, alpha, p["universe"])
     xi = fuzzy_basis(z, p["mf_slope"], p["boundaries"])
-    u = 0.0
-    for weight, basis in zip(theta, xi):
-        u += weight * basis
+    if len(xi) == 4:  # the paper's four rules unrolled (the same sum, left to right)
+        u = theta[0] * xi[0] + theta[1] * xi[1] + theta[2] * xi[2] + theta[3] * xi[3]
+    else:
+        u = 0.0
+        for weight, basis in zip(theta, xi):
+            u += weight * basis
     if variant == VARIANT_FAE:
         u += w_hat
     return u, modified, alpha, xi
