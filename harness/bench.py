@@ -7,6 +7,8 @@ On the same ``pendulum_case1``/``vud`` system at the same step:
 4. the floor: a bare loop of raw fmpy setReal/doStep/getReal calls on FMUs of the
    same shape whose doStep does no work (built from ``NULL_SCRIPT``);
 5. the in-process oracle (the same math, no FMI);
+6. the native edition (C FMUs, docs/native.md): our master with them, and libcosim
+   (libcosimpy) with either edition and no worker threads, on the same exported SSP;
 each with its ratio to ours.  Speed targets live here, not in timed tests.
 """
 from __future__ import annotations
@@ -85,10 +87,26 @@ def floor_us_per_step(scenario, null_paths: dict) -> float:
     return 1e6 * elapsed / steps
 
 
-def master_us_per_step(scenario, algorithm: str) -> tuple[float, float]:
+def master_us_per_step(scenario, algorithm: str, fmu_paths: dict | None = None) -> tuple[float, float]:
     """(loop only, whole run incl. instantiation and initialisation) in microseconds per step."""
-    result = Master(scenario, algorithm).run()
+    result = Master(scenario, algorithm, fmu_paths).run()
     return result.us_per_step, 1e6 * result.wall_s / scenario.steps
+
+
+def libcosim_us_per_step(package_dir: Path, scenario) -> float:
+    """libcosim's own stepping loop on a package made by libcosim_engine.with_algorithm."""
+    from .libcosim_engine import run_libcosim
+
+    return run_libcosim(package_dir, scenario.stop, scenario.step).loop_us_per_step
+
+
+def native_paths() -> dict | None:
+    """{model identifier: native FMI 2.0 FMU}, or None when zig's compiler is not installed."""
+    import build_native
+
+    if not build_native.compiler_available():
+        return None
+    return {name: paths[2] for name, paths in build_native.ensure_built().items()}
 
 
 def oracle_us_per_step(scenario) -> float:
@@ -166,8 +184,25 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
     notes = {}
     with tempfile.TemporaryDirectory(prefix="afc_bench_") as folder:
         folder = Path(folder)
-        package = ssp.export_ssp(scenario, folder / f"{scenario.name}.ssp")
+        import build_fmu
+
+        python_paths = build_fmu.ensure_built(edition="python")
+        package = ssp.export_ssp(scenario, folder / f"{scenario.name}.ssp", fmu_paths=python_paths)
         null_paths = build_null_fmus(folder)
+        native = native_paths()
+        from .libcosim_engine import with_algorithm
+        libcosim_python = with_algorithm(package, folder / "libcosim_python", scenario.step, workers=0)
+        measurements = {}
+        if native is None:
+            notes["native_feedthrough"] = notes["libcosim_native"] = "no C compiler: pip install -e '.[native]'"
+        else:
+            native_package = ssp.export_ssp(scenario, folder / f"{scenario.name}_native.ssp", fmu_paths=native)
+            libcosim_native = with_algorithm(native_package, folder / "libcosim_native", scenario.step, workers=0)
+            measurements = {
+                "native_feedthrough": lambda: master_us_per_step(scenario, "feedthrough", native),
+                "libcosim_native": lambda: libcosim_us_per_step(libcosim_native, scenario),
+            }
+        measurements["libcosim_python"] = lambda: libcosim_us_per_step(libcosim_python, scenario)
         _best_of(figures, notes, {
             "ours_feedthrough": lambda: master_us_per_step(scenario, "feedthrough"),
             "ours_jacobi": lambda: master_us_per_step(scenario, "jacobi"),
@@ -175,10 +210,12 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
             "ecos": lambda: ecos_us_per_step(package, scenario),
             "floor": lambda: floor_us_per_step(scenario, null_paths),
             "oracle": lambda: oracle_us_per_step(scenario),
+            **measurements,
         }, repeat)
     ours, ours_whole = figures["ours_feedthrough_us"], figures["ours_feedthrough_whole_us"]
     figures["real_time_factor"] = scenario.step / (ours * 1e-6)
-    for key in ("ours_jacobi_us", "ecos_us", "floor_us", "oracle_us"):
+    for key in ("ours_jacobi_us", "ecos_us", "floor_us", "oracle_us", "native_feedthrough_us",
+                "libcosim_native_us", "libcosim_python_us"):
         figures[key.replace("_us", "_ratio_to_ours")] = figures[key] / ours if figures.get(key) else None
     for key in ("ours_jacobi_whole_us", "fmpy_ssp_whole_us", "ecos_whole_us"):
         figures[key.replace("_us", "_ratio_to_ours")] = figures[key] / ours_whole if figures.get(key) else None
@@ -198,7 +235,10 @@ def bench_command(args) -> int:
     print(f"  {'us per step':36s} {'loop':>9s} {'x ours':>7s} {'whole run':>10s} {'x ours':>7s}")
     rows = [("our master (feedthrough)", "ours_feedthrough"), ("our master (jacobi)", "ours_jacobi"),
             ("fmpy SSP simulator", "fmpy_ssp"), ("Ecos", "ecos"),
-            ("floor: bare fmpy calls, null FMUs", "floor"), ("oracle: same math, no FMI", "oracle")]
+            ("floor: bare fmpy calls, null FMUs", "floor"), ("oracle: same math, no FMI", "oracle"),
+            ("native FMUs, our master (feedthrough)", "native_feedthrough"),
+            ("libcosim, pythonfmu FMUs, 0 workers", "libcosim_python"),
+            ("libcosim, native FMUs, 0 workers", "libcosim_native")]
 
     def cell(value, reference):
         return f"{'':>9s} {'':>7s}" if value is None else f"{value:9.2f} {value / reference:7.2f}"
@@ -212,6 +252,10 @@ def bench_command(args) -> int:
     print(f"  real-time factor of ours: {figures['real_time_factor']:.2f}")
     print(f"  target: ours <= 1.5 x (floor + oracle) = {figures['target_floor_plus_oracle_x1_5_us']:.2f} us/step; "
           f"ours {ours:.2f}")
+    native, libcosim = figures.get("native_feedthrough_us"), figures.get("libcosim_native_us")
+    if native:
+        print(f"  target: native FMUs in our master <= 8 us/step: {native:.2f}; "
+              f"in libcosim (0 workers) <= 2 us/step: {libcosim:.2f}" if libcosim else "")
     fmpy_whole = figures.get("fmpy_ssp_whole_us")
     if fmpy_whole:
         print(f"  target: ours at least 2x faster than fmpy's SSP simulator (whole runs): "
