@@ -41,7 +41,8 @@ class FmuSource:
 
 FMUS = (
     FmuSource("AdaptiveFuzzyController", ROOT / "fmu_src" / "adaptive_fuzzy_controller_fmu.py",
-              (BASE, ROOT / "fmu_src" / "afc_math.py")),
+              (BASE, ROOT / "fmu_src" / "afc_math.py",
+               ROOT / "fmu_src" / "initial_error_latch.py", ROOT / "fmu_src" / "chatter_monitor.py")),
     FmuSource("InvertedPendulum", ROOT / "plants" / "inverted_pendulum_fmu.py",
               (BASE, ROOT / "plants" / "inverted_pendulum_model.py",
                ROOT / "plants" / "plant_integration.py", ROOT / "plants" / "rk4_plant_slave.py")),

@@ -10,9 +10,12 @@ Co-simulation semantics:
 * doStep(t, h) advances theta (and w_hat for variant 3) over the step with
   the inputs held at their values at t: the sampled-data update
   ``theta += h * dtheta(t)`` (explicit Euler) that an embedded target runs.
-* e(0), de(0), ..., e^(n-1)(0) of the modified error (Remark 3, (36)) are
-  latched when initialisation ends, from the inputs set by then
-  (``_latch_initial_error``).
+* e(0), de(0), ..., e^(n-1)(0) of the modified error (Remark 3, (36)) and
+  its time origin come from the inputs, robust to hosts that hand
+  placeholders at initialisation (``initial_error_latch``,
+  docs/host_robustness.md), or from parameters.
+* The controller watches its own u for chatter (``chatter_monitor``) and
+  warns once, naming the step and the remedy.
 * order n and sets m (Integer parameters, appended to the table) make it the
   controller of an nth-order plant with m fuzzy sets per input: wire e, de,
   ..., e^(n-1) (and ym, ..., ym^(n-1) for fls_input = 2); M = m^n rule
@@ -22,6 +25,8 @@ import math
 from operator import itemgetter
 
 import afc_math
+import chatter_monitor
+import initial_error_latch as latch_rule
 # pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
 # so the project's base class is imported under that name.
 from afc_slave_base import INPUT, OUTPUT, PARAMETER, Variable, finite, non_negative, positive
@@ -31,6 +36,9 @@ DIMENSIONLESS = ""
 _INF = math.inf
 # u depends on every error and reference input: n is a parameter (ym.. with fls_input = 2)
 FEEDTHROUGH = ("e", "de", "ym", "dym", "d2e", "d3e", "d2ym", "d3ym")
+INITIAL_ERROR_PARAMETERS = ("e0", "de0", "d2e0", "d3e0")  # pinned x(0), first n used
+INITIAL_ERROR_FROM_INPUTS = 1
+INITIAL_ERROR_PINNED = 2
 
 VARIABLES = (
     Variable("variant", PARAMETER, 1, kind="Integer", minimum=1, maximum=3,
@@ -72,6 +80,14 @@ VARIABLES = (
     Variable("theta3", OUTPUT, 0.0, description="rule weight theta_3 (rule (2,1))"),
     Variable("theta4", OUTPUT, 0.0, description="rule weight theta_4 (rule (2,2))"),
     Variable("w_hat", OUTPUT, 0.0, description="approximation-error estimate (variant 3; else 0)"),
+    # appended rows (value references are table order: never reorder)
+    Variable("initial_error", PARAMETER, INITIAL_ERROR_FROM_INPUTS, kind="Integer", minimum=1, maximum=2,
+             description="e(0), de(0) of the modified error: 1 = from the inputs, checked over the first "
+                         "doSteps (host-robust, docs/host_robustness.md); 2 = pinned by e0, de0, ..."),
+    finite("e0", 0.0, description="pinned e(0) (initial_error = 2)"),
+    finite("de0", 0.0, description="pinned de(0) (initial_error = 2)"),
+    finite("d2e0", 0.0, description="pinned d2e(0) (initial_error = 2, plant order n >= 3)"),
+    finite("d3e0", 0.0, description="pinned d3e(0) (initial_error = 2, plant order n = 4)"),
     # ---- the general controller (order n, m sets per input): appended rows, so the value
     # references above keep their numbers; entries beyond n are unused but validated
     Variable("order", PARAMETER, 2, kind="Integer", minimum=1, maximum=afc_math.ORDER_MAX,
@@ -120,14 +136,14 @@ def _vector_getter(names):
 
 class AdaptiveFuzzyController(Fmi2Slave):
     VARIABLES = VARIABLES
-    STATE_ATTRIBUTES = ("error0", "latch_time", "theta", "xi", "modified")
+    STATE_ATTRIBUTES = ("latch", "chatter", "theta", "xi", "modified")
     MODEL_DESCRIPTION = ("Direct adaptive fuzzy controller with variable universes of discourse "
                          "(Pan, Er, Huang, Wang, IEEE TFS 2011)")
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.error0 = (0.0, 0.0)
-        self.latch_time = 0.0
+        self.latch = [0.0] * latch_rule.size(2)
+        self.chatter = chatter_monitor.new_state()
         self.theta = [0.0] * afc_math.RULE_COUNT
         self.xi = (0.25, 0.25, 0.25, 0.25)
         self.modified = (0.0, 0.0)
@@ -155,11 +171,10 @@ class AdaptiveFuzzyController(Fmi2Slave):
 
     def _configure(self):
         """The constants of the per-step path (afc_math.controller_parameters, P B, boundaries,
-        the inputs and outputs in use) from the current parameters and latch."""
+        the inputs and outputs in use) from the current parameters."""
         n = self.order
         self._p = afc_math.controller_parameters(
-            {v.name: getattr(self, v.name) for v in VARIABLES if v.causality == PARAMETER},
-            self.error0, self.latch_time)
+            {v.name: getattr(self, v.name) for v in VARIABLES if v.causality == PARAMETER})
         self._error_inputs = ERROR_INPUTS[:n]
         self._error_vector = _vector_getter(ERROR_INPUTS[:n])
         self._reference_vector = _vector_getter(REFERENCE_INPUTS[:n])
@@ -169,28 +184,49 @@ class AdaptiveFuzzyController(Fmi2Slave):
         self._p_b = self._p["p_b"]
         self._default_shape = n == 2 and self.sets == 2
 
-    def _latch_initial_error(self, time):
-        """Latch e(t0), de(t0), ..., e^(n-1)(t0) and t0 = time for the modified error (36)."""
-        self.error0 = tuple(getattr(self, name) for name in self._error_inputs)
-        self.latch_time = time
-        afc_math.latch_error(self._p, self.error0, time)
+    def _latch_initial_error(self):
+        """e(t0), de(t0), ..., e^(n-1)(t0) and t0 of the modified error (36), from the latch rule's state."""
+        afc_math.latch_error(self._p, latch_rule.latched(self.latch), self.latch[latch_rule.ORIGIN])
 
     def initialize(self, start_time):
         self._configure()
-        self._latch_initial_error(start_time)  # once (Remark 3)
-        rules, n = self._p["rules"], self.order
-        self.theta = [float(self.theta0)] * rules
+        n = self.order
+        self.latch = [0.0] * latch_rule.size(n)  # n = the error vector's length
+        if self.initial_error == INITIAL_ERROR_PINNED:
+            latch_rule.pin(self.latch, start_time, [getattr(self, name) for name in INITIAL_ERROR_PARAMETERS])
+        else:  # tentative: checked over the first doSteps (Remark 3, initial_error_latch)
+            latch_rule.start(self.latch, start_time, self._error_vector(self.__dict__))
+        self._latch_initial_error()
+        chatter_monitor.start(self.chatter)
+        rules = self._p["rules"]
         attributes = self.__dict__
-        attributes.update(zip(self._theta_outputs, self.theta))
         attributes.update(dict.fromkeys(THETA_OUTPUTS[rules:], 0.0))
         attributes.update(dict.fromkeys(ERROR_OUTPUTS[n:], 0.0))
         attributes.update(dict.fromkeys(ALPHA_OUTPUTS[n:], 1.0))
+        self.restart_adaptation()
+
+    def restart_adaptation(self):
+        self.theta = [float(self.theta0)] * self._p["rules"]
+        self.__dict__.update(zip(self._theta_outputs, self.theta))
         self.w_hat = 0.0
+
+    def watch_initial_error(self, time):
+        """Let the latch rule see this doStep's inputs; restart on a re-latch, warn once."""
+        events = latch_rule.observe(self.latch, time, self._error_vector(self.__dict__))
+        if events & latch_rule.RELATCHED:
+            self._latch_initial_error()
+            self.restart_adaptation()
+            self.compute_outputs()  # E, dE, xi of this step from the new latch
+        if events & latch_rule.DECIDED:
+            message = latch_rule.warning(self.latch, self._error_inputs)
+            if message:
+                self.warn(message)
 
     def _set_fmu_state(self, state):
         super()._set_fmu_state(state)
         if self.initialized:  # the constants follow the restored parameters and latch
             self._configure()
+            self._latch_initial_error()
 
     def compute_outputs(self):
         attributes = self.__dict__
@@ -214,10 +250,12 @@ class AdaptiveFuzzyController(Fmi2Slave):
     def _overflow(self, u, modified, error):
         self.fail(f"outputs overflow at t = {self.time!r}: u = {u!r}, E = {modified!r} from "
                   f"{', '.join(f'{name} = {value!r}' for name, value in zip(self._error_inputs, error))} "
-                  f"(latched at t0 = {self.latch_time!r}: {self.error0!r}); "
+                  f"(latched at t0 = {self.latch[latch_rule.ORIGIN]!r}: {latch_rule.latched(self.latch)!r}); "
                   "the inputs are out of range or the closed loop diverged")
 
     def step(self, current_time, step_size):
+        if self.latch[latch_rule.OPEN]:  # the first few doSteps only
+            self.watch_initial_error(current_time)
         tau = afc_math.adaptation_signal(self.modified, self._p_b)
         theta = afc_math.adapted_weights(self.theta, tau, self.xi, self.gamma, self.m_theta, self.delta,
                                          step_size)
@@ -234,4 +272,6 @@ class AdaptiveFuzzyController(Fmi2Slave):
         else:
             self.__dict__.update(zip(self._theta_outputs, theta))
         self.w_hat = w_hat
+        if chatter_monitor.update(self.chatter, self.u, step_size):
+            self.warn(chatter_monitor.warning(self.chatter, step_size))
         return True

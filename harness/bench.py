@@ -87,9 +87,14 @@ def floor_us_per_step(scenario, null_paths: dict) -> float:
     return 1e6 * elapsed / steps
 
 
-def master_us_per_step(scenario, algorithm: str, fmu_paths: dict | None = None) -> tuple[float, float]:
-    """(loop only, whole run incl. instantiation and initialisation) in microseconds per step."""
+def master_us_per_step(scenario, algorithm: str, fmu_paths: dict | None = None,
+                       runs: dict | None = None) -> tuple[float, float]:
+    """(loop only, whole run incl. instantiation and initialisation) in microseconds per step.
+
+    The timed run's result is kept in ``runs[algorithm]`` (for the agreement check)."""
     result = Master(scenario, algorithm, fmu_paths).run()
+    if runs is not None:
+        runs[algorithm] = result
     return result.us_per_step, 1e6 * result.wall_s / scenario.steps
 
 
@@ -109,10 +114,26 @@ def native_paths() -> dict | None:
     return {name: paths[2] for name, paths in build_native.ensure_built().items()}
 
 
-def oracle_us_per_step(scenario) -> float:
+def oracle_us_per_step(scenario, runs: dict | None = None) -> float:
     started = clock.perf_counter()
-    simulate_oracle(scenario)
-    return 1e6 * (clock.perf_counter() - started) / scenario.steps
+    result = simulate_oracle(scenario)
+    elapsed = clock.perf_counter() - started
+    if runs is not None:
+        runs["oracle"] = result
+    return 1e6 * elapsed / scenario.steps
+
+
+def oracle_disagreement(runs: dict) -> float | None:
+    """Largest |master - oracle| over the recorded signals both have, on the timed runs
+    (they compute the same loop, so this is rounding; a benchmark that timed a broken or
+    different run would show it here)."""
+    master, oracle = runs.get("feedthrough"), runs.get("oracle")
+    if master is None or oracle is None:
+        return None
+    common = [name for name in master.columns if name in oracle]
+    if len(master.time) != len(oracle["time"]) or not common:
+        return float("inf")
+    return max(float(abs(master.signal(name) - oracle[name]).max()) for name in common)
 
 
 def fmpy_ssp_us_per_step(package: Path, scenario) -> float:
@@ -182,6 +203,7 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
     figures = {"scenario": scenario.name, "controller": controller, "step": scenario.step, "stop": scenario.stop,
                "steps": scenario.steps, "repeat": repeat}
     notes = {}
+    runs = {}
     with tempfile.TemporaryDirectory(prefix="afc_bench_") as folder:
         folder = Path(folder)
         import build_fmu
@@ -204,12 +226,12 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
             }
         measurements["libcosim_python"] = lambda: libcosim_us_per_step(libcosim_python, scenario)
         _best_of(figures, notes, {
-            "ours_feedthrough": lambda: master_us_per_step(scenario, "feedthrough"),
+            "ours_feedthrough": lambda: master_us_per_step(scenario, "feedthrough", runs=runs),
             "ours_jacobi": lambda: master_us_per_step(scenario, "jacobi"),
             "fmpy_ssp_whole": lambda: fmpy_ssp_us_per_step(package, scenario),
             "ecos": lambda: ecos_us_per_step(package, scenario),
             "floor": lambda: floor_us_per_step(scenario, null_paths),
-            "oracle": lambda: oracle_us_per_step(scenario),
+            "oracle": lambda: oracle_us_per_step(scenario, runs),
             **measurements,
         }, repeat)
     ours, ours_whole = figures["ours_feedthrough_us"], figures["ours_feedthrough_whole_us"]
@@ -220,6 +242,7 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
     for key in ("ours_jacobi_whole_us", "fmpy_ssp_whole_us", "ecos_whole_us"):
         figures[key.replace("_us", "_ratio_to_ours")] = figures[key] / ours_whole if figures.get(key) else None
     figures["target_floor_plus_oracle_x1_5_us"] = 1.5 * (figures["floor_us"] + figures["oracle_us"])
+    figures["oracle_max_abs_difference"] = oracle_disagreement(runs)
     figures["notes"] = notes
     return figures
 
@@ -250,6 +273,8 @@ def bench_command(args) -> int:
         note = figures["notes"].get(key) or figures["notes"].get(f"{key}_whole") or ""
         print(f"  {label:36s} {cell(loop, ours)} {cell(whole, ours_whole).rjust(18)} {note}")
     print(f"  real-time factor of ours: {figures['real_time_factor']:.2f}")
+    print(f"  timed runs of ours and the oracle agree within {figures['oracle_max_abs_difference']:.2g} "
+          "(largest difference of a recorded signal)")
     print(f"  target: ours <= 1.5 x (floor + oracle) = {figures['target_floor_plus_oracle_x1_5_us']:.2f} us/step; "
           f"ours {ours:.2f}")
     native, libcosim = figures.get("native_feedthrough_us"), figures.get("libcosim_native_us")

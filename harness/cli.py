@@ -71,10 +71,10 @@ def register_run(commands):
 
 def _subcommand_registrations():
     """Each subcommand lives in its own module with a ``register(commands)`` function."""
-    from . import bench, engines, regression, report_tables, ssp, sweep
+    from . import bench, engines, mutation, regression, report_tables, ssp, sweep
 
     return [register_run, report_tables.register, sweep.register, regression.register, ssp.register,
-            engines.register, bench.register]
+            engines.register, bench.register, mutation.register]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -74,7 +74,11 @@ def simulate_oracle(scenario: Scenario, algorithm: str = "feedthrough") -> dict:
     x1, x2 = float(plant["x1_start"]), float(plant["x2_start"])
     # initial values propagated in dependency order (both algorithms)
     ym, dym, e, de = reference_outputs(start, x1, x2)
-    p = afc_math.controller_parameters(controller, (e, de), start)  # e(0), de(0) latched at the start
+    if controller.get("initial_error", 1) == 2:  # pinned by the parameters e0, de0
+        error0 = (controller["e0"], controller["de0"])
+    else:  # consistent start inputs: the latch keeps them
+        error0 = (e, de)
+    p = afc_math.controller_parameters(controller, error0, start)
     if p["order"] != 2:
         raise ValueError(f"the oracle knows second-order plants, not order = {p['order']}")
     theta, w_hat = [float(controller["theta0"])] * p["rules"], 0.0

@@ -200,7 +200,9 @@ def test_new_variables_are_appended_and_old_references_kept(fmu_paths):
            "dE", "alpha1", "alpha2", "theta1", "theta2", "theta3", "theta4", "w_hat"]
     assert names[:len(old)] == old
     assert {v.name: v.valueReference for v in md.modelVariables}["w_hat"] == len(old) - 1
-    assert names[len(old):len(old) + 2] == ["order", "sets"]
+    latch = ["initial_error", "e0", "de0", "d2e0", "d3e0"]  # appended before (host-robust latch)
+    assert names[len(old):len(old) + len(latch)] == latch
+    assert names[len(old) + len(latch):len(old) + len(latch) + 2] == ["order", "sets"]
     assert f"theta{afc_math.RULES_MAX}" in names and f"theta{afc_math.RULES_MAX + 1}" not in names
     deps = {u.variable.name: sorted(d.name for d in u.dependencies) for u in md.outputs}
     assert deps["u"] == sorted(["e", "de", "d2e", "d3e", "ym", "dym", "d2ym", "d3ym"])
@@ -236,7 +238,9 @@ def test_fmu_matches_the_pure_math_at_any_order(fmu_paths, order, sets):
     inputs = ("e", "de", "d2e", "d3e")[:order]
     references = ("ym", "dym", "d2ym", "d3ym")[:order]
     start = {name: 0.1 * (i + 1) for i, name in enumerate(inputs)}
-    c.initialize(order=order, sets=sets, variant=1, k1=4.0, k2=6.0, k3=4.0, k4=1.0, **start)
+    # the inputs below are no derivative chain: pin e(0), de(0), ... (no host-robust re-latch)
+    pinned = dict(zip(("e0", "de0", "d2e0", "d3e0"), start.values()))
+    c.initialize(order=order, sets=sets, variant=1, k1=4.0, k2=6.0, k3=4.0, k4=1.0, initial_error=2, **pinned)
     values = {v.name: v.start for v in __import__("build_fmu").model_class("AdaptiveFuzzyController").VARIABLES
               if v.causality == "parameter"}
     values.update(order=order, sets=sets, variant=1, k1=4.0, k2=6.0, k3=4.0, k4=1.0)
