@@ -107,8 +107,10 @@ MUTATIONS = (
     M("fixed_gets_variable_universes", "fmu_src/adaptive_fuzzy_controller_fmu.py", "compute_outputs",
       "if variant == afc_math.VARIANT_VUD:", "if variant != afc_math.VARIANT_FAE:", CONTROLLER_TESTS,
       "the fixed-universe stand-in contracts its universes"),
-    M("latch_de0", "fmu_src/adaptive_fuzzy_controller_fmu.py", "initialize", "self.e0, self.de0 = self.e, self.de",
-      "self.e0, self.de0 = self.e, 0.0", CONTROLLER_TESTS, "de(0) not latched (Remark 3)"),
+    M("latch_de0", "fmu_src/initial_error_latch.py", "start",
+      "state[LATCHED + i] = state[LATCHED + n + i] = state[LATCHED + 2 * n + i] = float(sample[i])",
+      "state[LATCHED + i] = state[LATCHED + n + i] = state[LATCHED + 2 * n + i] = float(sample[0])",
+      CONTROLLER_TESTS, "de(0) latched as e(0) (Remark 3)"),
     # --- the plants and the reference (plants/)
     M("pendulum_denominator_sign", "plants/inverted_pendulum_model.py", "pendulum_derivative",
       "FOUR_THIRDS - mp_over_mt * c * c", "FOUR_THIRDS + mp_over_mt * c * c", PLANT_TESTS,
