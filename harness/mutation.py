@@ -109,9 +109,10 @@ MUTATIONS = (
     M("fixed_gets_variable_universes", "fmu_src/afc_math.py", "controller_output",
       "if variant == VARIANT_VUD:", "if variant != VARIANT_FAE:", CONTROLLER_TESTS,
       "the fixed-universe stand-in contracts its universes"),
-    M("latch_de0", "fmu_src/adaptive_fuzzy_controller_fmu.py", "initialize",
-      "latch_rule.start(self.latch, start_time, self._error_vector(self.__dict__))",
-      "latch_rule.start(self.latch, start_time, (self.e, 0.0))", CONTROLLER_TESTS, "de(0) not latched (Remark 3)"),
+    M("latch_de0", "fmu_src/initial_error_latch.py", "start",
+      "state[LATCHED + i] = state[LATCHED + n + i] = state[LATCHED + 2 * n + i] = float(sample[i])",
+      "state[LATCHED + i] = state[LATCHED + n + i] = state[LATCHED + 2 * n + i] = float(sample[0])",
+      CONTROLLER_TESTS, "de(0) latched as e(0) (Remark 3)"),
     # --- the general controller: n inputs, m sets (issue 17)
     M("membership_middle_sign", "fmu_src/afc_math.py", "memberships", "result.append(previous - rising)",
       "result.append(rising - previous)", GENERAL_TESTS, "middle sets sig(c_l) - sig(c_(l-1)): negative"),
