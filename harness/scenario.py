@@ -134,7 +134,9 @@ def scenario_names() -> list[str]:
 
 
 def load(name_or_path) -> Scenario:
-    """Load a scenario by name (harness/scenarios/NAME.toml) or by file path."""
+    """Load a scenario by name (harness/scenarios/NAME.toml) or by file path (a Scenario: a copy of it)."""
+    if isinstance(name_or_path, Scenario):
+        return copy.deepcopy(name_or_path)
     path = Path(name_or_path)
     if path.suffix != ".toml":
         path = SCENARIO_DIR / f"{name_or_path}.toml"
