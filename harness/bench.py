@@ -139,15 +139,16 @@ def ecos_us_per_step(package: Path, scenario) -> tuple[float, float]:
     ecospy = engines.import_ecospy()
     ecospy.EcosLib.set_log_level("warn")
     started = clock.perf_counter()
-    simulation = ecospy.EcosSimulation(ssp_path=str(package), step_size=scenario.step)
-    try:
-        simulation.init(start_time=scenario.start, parameter_set=engines.read_package(package).parameter_set)
-        loop_start = clock.perf_counter()
-        simulation.step(scenario.steps)
-        loop = clock.perf_counter() - loop_start
-        simulation.terminate()
-    finally:
-        simulation.free()
+    with engines.ecos_temp_dir():
+        simulation = ecospy.EcosSimulation(ssp_path=str(package), step_size=scenario.step)
+        try:
+            simulation.init(start_time=scenario.start, parameter_set=engines.read_package(package).parameter_set)
+            loop_start = clock.perf_counter()
+            simulation.step(scenario.steps)
+            loop = clock.perf_counter() - loop_start
+            simulation.terminate()
+        finally:
+            simulation.free()
     whole = clock.perf_counter() - started
     return 1e6 * loop / scenario.steps, 1e6 * whole / scenario.steps
 

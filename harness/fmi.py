@@ -81,7 +81,17 @@ class Component:
     time: float = 0.0
 
     def instantiate(self, logging_on: bool = False):
-        self.unzip_dir = extract(str(self.info.path), tempfile.mkdtemp(prefix=f"afc_{self.name}_"))
+        """Extract and instantiate; on failure the extraction is removed before the error propagates."""
+        self.unzip_dir = tempfile.mkdtemp(prefix=f"afc_{self.name}_")
+        try:
+            self._instantiate(logging_on)
+        except BaseException:
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            raise
+        return self
+
+    def _instantiate(self, logging_on: bool):
+        extract(str(self.info.path), self.unzip_dir)
         self.slave = self._call("loading the FMU's shared library", lambda: FMU2Slave(
             guid=self.info.guid, unzipDirectory=self.unzip_dir,
             modelIdentifier=self.info.model_identifier, instanceName=self.name))
@@ -96,7 +106,6 @@ class Component:
         self._raw_get_real = functions["fmi2GetReal"]
         self._raw_do_step = functions["fmi2DoStep"]
         self._component = self.slave.component
-        return self
 
     def _log_message(self, env, instance, status, category, message):
         label = STATUS_NAMES[status].upper() if 0 <= status < len(STATUS_NAMES) else str(status)

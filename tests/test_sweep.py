@@ -112,13 +112,20 @@ def test_local_pool_sweep_records_every_point_with_scores_or_a_reason(fmu_paths,
     assert (out / "heatmap_ITAE.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_dask_cluster_gives_the_same_rows_as_the_local_pool(fmu_paths, local_sweep, tmp_path):
+def test_dask_cluster_gives_the_same_rows_as_the_local_pool(fmu_paths, local_sweep, tmp_path, monkeypatch):
     distributed = pytest.importorskip("distributed")
+    import dask
+
     out, _ = local_sweep
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None) as cluster:
+    scratch = tmp_path / "temp"  # the workers' FMU cache and Dask's scratch space, removed with tmp_path
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))
+    with dask.config.set({"temporary-directory": str(scratch)}), \
+            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                     dashboard_address=None) as cluster:
         assert cli_main(["sweep", *SMALL, "--out", str(tmp_path), "--scheduler", cluster.scheduler_address]) == 0
     assert rows_of(tmp_path / "sweep.csv") == rows_of(out / "sweep.csv")  # scores bit-identical
+    assert (scratch / "afc-sweep-fmus").is_dir()  # the workers cached the FMUs here, not in the real temp folder
 
 
 def test_unreachable_scheduler_is_a_clear_error(fmu_paths, tmp_path, capsys, monkeypatch):
