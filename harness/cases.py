@@ -69,8 +69,13 @@ class Case:
         return self.name + (" [" + ", ".join(settings) + "]" if settings else "")
 
     def build(self) -> scenarios.Scenario:
-        """The scenario with the controller, step, stop, overrides and FMU files set."""
-        scenario = scenarios.configure(self.scenario, self.controller, self.step, self.stop, self.overrides)
+        """The scenario with the controller, step, stop, overrides and FMU files set.
+
+        A stop that is not a whole number of steps is moved to the nearest one and the
+        outcome's ``notes`` say so (the commands check the stops the user gives first).
+        """
+        scenario = scenarios.configure(self.scenario, self.controller, self.step, self.stop, self.overrides,
+                                       fit_stop="move")
         for instance, path in self.fmu_files:
             scenario.components[instance].fmu = str(path)
         return scenario
@@ -113,7 +118,8 @@ def run_case(case: Case, fmu_paths: dict | None = None) -> dict:
 
     scenario = case.build()
     outcome = {"scenario": case.scenario_name, "controller": case.controller, "step": scenario.step,
-               "start": scenario.start, "stop": scenario.stop, "algorithm": case.algorithm}
+               "start": scenario.start, "stop": scenario.stop, "algorithm": case.algorithm,
+               "notes": list(scenario.notes)}
     wall = clock.perf_counter()
     result = None
     try:

@@ -25,6 +25,8 @@ def _progress_bar(total: int, description: str, enabled: bool):
 
 def run_command(args) -> int:
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
+    for note in scenario.notes:
+        print(f"note: {note}", file=sys.stderr)
     progress, close = _progress_bar(scenario.steps, f"{scenario.name}/{args.controller}",
                                     enabled=not args.json and sys.stderr.isatty())
     try:

@@ -58,6 +58,7 @@ import contextlib
 import ctypes
 import functools
 import os
+import sys
 import time as clock
 import xml.etree.ElementTree as ElementTree
 import zipfile
@@ -432,6 +433,8 @@ def compare_command(args) -> int:
     from . import scenario as scenarios
 
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
+    for note in scenario.notes:
+        print(f"note: {note}", file=sys.stderr)
     with tempfile.TemporaryDirectory(prefix="afc_engines_") as directory:
         results = run_all(scenario, directory, workers=args.workers)
     start = scenario.start + args.skip_steps * scenario.step if args.skip_steps else None

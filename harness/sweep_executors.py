@@ -35,22 +35,38 @@ def run_point(task: dict, fmu_blobs: dict | None = None) -> dict:
     outcome = run_case(case)
     scores = {key: outcome[key] for key in SCORE_KEYS} if outcome["status"] == "ok" else {}
     return {"controller": case.controller, "values": list(task["values"]), "scores": scores,
-            "wall_s": outcome["wall_s"], "status": outcome["status"], "reason": outcome["reason"]}
+            "wall_s": outcome["wall_s"], "status": outcome["status"],
+            "reason": outcome["reason"] or "; ".join(outcome["notes"])}  # e.g. a stop moved to whole steps
 
 
 def _fmu_cache_dir() -> Path:
     return Path(tempfile.gettempdir()) / "afc-sweep-fmus"
 
 
+def sha256_of(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
 def _with_cached_fmus(case: Case, hashes: dict, blobs: dict) -> Case:
-    """Write the FMUs received from the client to this host's cache; point the case at them."""
+    """Write the FMUs received from the client to this host's cache; point the case at them.
+
+    A file already in the cache is used only if its SHA-256 is the one the client sent
+    (a truncated, corrupted or foreign file at that path is replaced from the bytes received).
+    """
     files = []
     for instance, (digest, filename) in hashes.items():
         path = _fmu_cache_dir() / digest[:20] / filename
-        if not path.exists():
+        if not path.exists() or sha256_of(path) != digest:
+            data = blobs[digest]
+            if hashlib.sha256(data).hexdigest() != digest:
+                raise RuntimeError(f"the bytes received for {filename} do not have the SHA-256 the client sent")
             path.parent.mkdir(parents=True, exist_ok=True)
             partial = path.with_name(f".{filename}.{os.getpid()}.part")
-            partial.write_bytes(blobs[digest])
+            partial.write_bytes(data)
             os.replace(partial, path)  # atomic: other worker processes see all or nothing
         files.append((instance, str(path)))
     return dataclasses.replace(case, fmu_files=tuple(files))

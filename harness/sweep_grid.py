@@ -148,9 +148,13 @@ def plan_sweep(scenario_name, controllers, grids, metric="ITAE", stop=None, step
         raise ScenarioError(f"--grid {', '.join(names)}: {error}") from None
     for grid in grids:
         instance, _, parameter = grid.name.partition(".")
-        if not parameter:  # step or stop: every value must leave at least one step
+        if not parameter:  # step or stop: at least one step, and a given stop a whole number of steps
             for value in grid.values:
-                _ = _scenario_point(scenario, controllers[0], [grid.name], [value]).steps
+                point = _scenario_point(scenario, controllers[0], [grid.name], [value])
+                try:
+                    scenarios.whole_steps(point, stop_given=grid.name == "stop" or stop is not None)
+                except ScenarioError as error:
+                    raise ScenarioError(f"--grid {grid.name}={value:g}: {error}") from None
             continue
         kind = master.infos[instance].variables[parameter].type
         if kind in ("Integer", "Boolean", "Enumeration") and any(v != int(v) for v in grid.values):
