@@ -25,10 +25,10 @@ def _progress_bar(total: int, description: str, enabled: bool):
 
 def run_command(args) -> int:
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
-    for note in scenario.notes:
-        print(f"note: {note}", file=sys.stderr)
     progress, close = _progress_bar(scenario.steps, f"{scenario.name}/{args.controller}",
                                     enabled=not args.json and sys.stderr.isatty())
+    for note in scenario.notes:  # e.g. the stop moved to a whole number of steps
+        print(f"note: {note}", file=sys.stderr)
     try:
         result = simulate(scenario, algorithm=args.algorithm, progress=progress)
     except SimulationFailed as failure:

@@ -187,9 +187,9 @@ def export_command(args) -> int:
     overrides = [(dotted, float(value)) for dotted, _, value in
                  (assignment.partition("=") for assignment in args.set or [])]
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop, overrides)
-    for note in scenario.notes:
-        print(f"note: {note}", file=sys.stderr)
     out = args.out or f"{scenario.name}_{args.controller}.ssp"
+    for note in scenario.notes:  # e.g. the stop moved to a whole number of steps
+        print(f"note: {note}", file=sys.stderr)
     path = export_ssp(scenario, out, start_inputs=args.start_inputs)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB): {', '.join(scenario.components)}; "
           f"parameter set '{PARAMETER_SET}'"
