@@ -71,11 +71,14 @@ class Case:
     def build(self) -> scenarios.Scenario:
         """The scenario with the controller, step, stop, overrides and FMU files set.
 
-        A stop that is not a whole number of steps is moved to the nearest one and the
-        outcome's ``notes`` say so (the commands check the stops the user gives first).
+        The run covers a whole number of steps.  A case that varies the step (``step``, or
+        a ``step`` override: the step study, sweeps over the step) moves a stop off its
+        step grid to the nearest whole number of steps, and the outcome's ``notes`` say
+        so; otherwise a given stop off the step grid is an error (ScenarioError).
         """
+        varies_step = self.step is not None or any(name == "step" for name, _ in self.overrides)
         scenario = scenarios.configure(self.scenario, self.controller, self.step, self.stop, self.overrides,
-                                       fit_stop="move")
+                                       fit_stop="move" if varies_step else "error")
         for instance, path in self.fmu_files:
             scenario.components[instance].fmu = str(path)
         return scenario
@@ -183,6 +186,8 @@ def parallel_map(function, items: list, jobs: int | None = None, description: st
 def run_cases(cases: list, jobs: int | None = None, description: str = "co-simulations",
               progress: bool | None = None, fmu_paths: dict | None = None) -> list:
     """Outcomes of ``cases`` in their order, computed on ``jobs`` processes with one progress bar."""
+    for case in cases:  # a mistake in a case (a stop off the step grid, ...) is one error before any run
+        case.build()
     if fmu_paths is None:
         import build_fmu
 

@@ -234,8 +234,6 @@ def report_markdown(rows: list, convergence: dict, figure_paths: list, wall_s: f
 
 
 def tables_command(args) -> int:
-    for name in ALL_SCENARIOS:  # a --stop that is not a whole number of steps: one clear error, before any run
-        scenarios.configure(name, stop=args.stop)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     jobs = args.jobs or default_jobs()

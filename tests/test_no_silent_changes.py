@@ -134,3 +134,20 @@ def test_the_worker_cache_replaces_a_file_whose_hash_is_wrong(fmu_paths, tmp_pat
     with pytest.raises(RuntimeError, match="do not have the SHA-256"):
         sweep_executors._with_cached_fmus(Case("pendulum_case1", "vud"),
                                           {"reference": ("0" * 64, "TrackingReference.fmu")}, {"0" * 64: data})
+
+
+def test_tables_refuse_a_stop_off_the_step_grid_before_any_run(fmu_paths, tmp_path, capsys, monkeypatch):
+    from harness import cases
+
+    started = []
+    monkeypatch.setattr(cases, "parallel_map", lambda *args, **kwargs: started.append(args) or [])
+    assert cli_main(["tables", "--out", str(tmp_path), "--stop", "0.0101", "--jobs", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "stop = 0.0101 s is not a whole number of steps of 0.0004 s" in err, err
+    assert not started  # refused before any co-simulation started
+
+
+def test_a_case_with_a_given_stop_and_the_scenario_s_step_must_fit():
+    with pytest.raises(ScenarioError, match="nearest valid stop: 0.01 s"):
+        Case("pendulum_case1", "vud", stop=0.0101).build()
+    assert Case("pendulum_case1", "vud", step=4e-4, stop=0.0101).build().notes  # a case that varies the step
