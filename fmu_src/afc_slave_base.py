@@ -245,6 +245,7 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         # initialisation ends, then inputs only (every parameter is fixed), then nothing
         self._settable_before_step = [v.causality != OUTPUT for v in self.VARIABLES]
         self._inputs = [v.causality == INPUT for v in self.VARIABLES]
+        self._nothing_settable = [False] * len(self.VARIABLES)
         self._settable = self._settable_before_step
         for v in self.VARIABLES:
             setattr(self, v.name, int(v.start) if v.kind == "Integer" else float(v.start))
@@ -320,7 +321,7 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
     def _enter_mode(self):
         """Set what may be set and whether doStep may run, from ``initialized`` and ``terminated``."""
         self.stepping = self.initialized and not self.terminated
-        self._settable = ([False] * len(self.VARIABLES) if self.terminated else
+        self._settable = (self._nothing_settable if self.terminated else
                           self._inputs if self.initialized else self._settable_before_step)
         self.stale_on_set = self._feedthrough or not self.initialized
 
