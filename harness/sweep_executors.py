@@ -32,7 +32,10 @@ def run_point(task: dict, fmu_blobs: dict | None = None) -> dict:
     case = task["case"]
     if fmu_blobs is not None:
         case = _with_cached_fmus(case, task["fmu_hashes"], fmu_blobs)
-    outcome = run_case(case)
+    try:
+        outcome = run_case(case)
+    except SystemExit as stop:  # SIGTERM of a cancelled local pool: the FMUs were freed on the way out
+        os._exit(stop.code if isinstance(stop.code, int) else 1)
     scores = {key: outcome[key] for key in SCORE_KEYS} if outcome["status"] == "ok" else {}
     return {"controller": case.controller, "values": list(task["values"]), "scores": scores,
             "wall_s": outcome["wall_s"], "status": outcome["status"],
@@ -81,6 +84,11 @@ def point_task(plan: SweepPlan, controller: str, values) -> dict:
 
 def _ignore_sigint():
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and cancels
+    signal.signal(signal.SIGTERM, _stop_worker)  # a cancelled point still frees its FMUs (and their extractions)
+
+
+def _stop_worker(signum, frame):
+    raise SystemExit(128 + signum)
 
 
 def _outcome(future) -> tuple:

@@ -170,9 +170,11 @@ KILLED = ["pendulum_case2", "--controller", "vud", "--grid", "plant.mp=0.1:1:4",
 
 def test_a_killed_sweep_resumes_without_recomputing_finished_points(fmu_paths, tmp_path):
     csv_path = tmp_path / "sweep.csv"
+    scratch = tmp_path / "temp"  # a killed run cannot clean up: its FMU extractions stay in tmp_path
+    scratch.mkdir()
     process = subprocess.Popen([sys.executable, "-m", "harness", "sweep", *KILLED, "--out", str(tmp_path)],
                                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                               start_new_session=True)
+                               start_new_session=True, env=dict(os.environ, TMPDIR=str(scratch)))
     deadline = time.monotonic() + 60
     try:
         while time.monotonic() < deadline and process.poll() is None:
