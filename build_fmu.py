@@ -41,7 +41,8 @@ class FmuSource:
 
 FMUS = (
     FmuSource("AdaptiveFuzzyController", ROOT / "fmu_src" / "adaptive_fuzzy_controller_fmu.py",
-              (BASE, ROOT / "fmu_src" / "afc_math.py")),
+              (BASE, ROOT / "fmu_src" / "afc_math.py",
+               ROOT / "fmu_src" / "initial_error_latch.py", ROOT / "fmu_src" / "chatter_monitor.py")),
     FmuSource("InvertedPendulum", ROOT / "plants" / "inverted_pendulum_fmu.py",
               (BASE, ROOT / "plants" / "inverted_pendulum_model.py",
                ROOT / "plants" / "plant_integration.py", ROOT / "plants" / "rk4_plant_slave.py")),
@@ -104,8 +105,31 @@ def build(fmu: FmuSource) -> Path:
     return build_script(fmu.script, fmu.fmu_path, fmu.project_files)
 
 
-def ensure_built(force: bool = False, verbose: bool = False) -> dict[str, Path]:
-    """Build missing or stale FMUs; return {model identifier: path}."""
+EDITIONS = ("python", "native", "all")
+#: the edition the harness runs (``--edition`` sets it for the process and its workers)
+EDITION_VARIABLE = "AFC_EDITION"
+
+
+def selected_edition() -> str:
+    edition = os.environ.get(EDITION_VARIABLE, "python") or "python"
+    if edition not in ("python", "native", "native3"):
+        raise SystemExit(f"error: {EDITION_VARIABLE}={edition!r} is invalid; valid: python, native, native3")
+    return edition
+
+
+def ensure_built(force: bool = False, verbose: bool = False, edition: str | None = None) -> dict[str, Path]:
+    """Build missing or stale FMUs; return {model identifier: path}.
+
+    ``edition``: "python" (pythonfmu, build/fmus/), "native" (C, FMI 2.0,
+    build/fmus/native/) or "native3" (C, FMI 3.0, build/fmus/native/fmi3/);
+    default: $AFC_EDITION, else "python".
+    """
+    edition = edition or selected_edition()
+    if edition in ("native", "native3"):
+        import build_native
+        version = 3 if edition == "native3" else 2
+        return {name: paths[version]
+                for name, paths in build_native.ensure_built(force=force, verbose=verbose).items()}
     paths = {}
     for fmu in FMUS:
         if force or is_stale(fmu):
@@ -154,9 +178,22 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--force", action="store_true", help="rebuild every FMU")
     parser.add_argument("--readme", action="store_true", help="rewrite README.md's variable tables")
+    parser.add_argument("--edition", choices=EDITIONS, default=None,
+                        help="python (pythonfmu), native (C, FMI 2.0 and 3.0, docs/native.md) or all "
+                             "(default: all when zig's compiler is installed, else python)")
     args = parser.parse_args(argv)
-    for identifier, path in ensure_built(force=args.force, verbose=True).items():
-        print(f"{identifier}: {path.relative_to(ROOT)}")
+    editions = ["python", "native"] if args.edition in (None, "all") else [args.edition]
+    if "native" in editions:
+        import build_native
+        if not build_native.compiler_available():
+            if args.edition == "native":
+                print("error: the native edition needs zig's C compiler: pip install -e '.[native]'", file=sys.stderr)
+                return 1
+            editions.remove("native")
+            print("note: native edition skipped (no C compiler): pip install -e '.[native]' to build it")
+    for edition in editions:
+        for identifier, path in ensure_built(force=args.force, verbose=True, edition=edition).items():
+            print(f"{identifier} ({edition}): {path.relative_to(ROOT)}")
     if args.readme:
         readme = ROOT / "README.md"
         readme.write_text(readme_with_tables(readme.read_text()))

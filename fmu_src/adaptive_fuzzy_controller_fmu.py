@@ -10,12 +10,17 @@ Co-simulation semantics:
 * doStep(t, h) advances theta (and w_hat for variant 3) over the step with
   the inputs held at their values at t: the sampled-data update
   ``theta += h * dtheta(t)`` (explicit Euler) that an embedded target runs.
-* e(0), de(0) of the modified error (Remark 3) are latched when
-  initialisation ends, from the inputs set by then.
+* e(0), de(0) of the modified error (Remark 3) and its time origin come from
+  the inputs, robust to hosts that hand placeholders at initialisation
+  (``initial_error_latch``, docs/host_robustness.md), or from parameters.
+* The controller watches its own u for chatter (``chatter_monitor``) and
+  warns once, naming the step and the remedy.
 """
 import math
 
 import afc_math
+import chatter_monitor
+import initial_error_latch as latch_rule
 # pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
 # so the project's base class is imported under that name.
 from afc_slave_base import INPUT, OUTPUT, PARAMETER, Variable, finite, non_negative, positive
@@ -24,6 +29,10 @@ from afc_slave_base import TableSlave as Fmi2Slave
 DIMENSIONLESS = ""
 _INF = math.inf
 FEEDTHROUGH = ("e", "de", "ym", "dym")
+ERROR_INPUTS = ("e", "de")  # the error vector [e, de, ...] of the plant's order n
+INITIAL_ERROR_PARAMETERS = ("e0", "de0", "d2e0", "d3e0")  # pinned x(0), first n used
+INITIAL_ERROR_FROM_INPUTS = 1
+INITIAL_ERROR_PINNED = 2
 
 VARIABLES = (
     Variable("variant", PARAMETER, 1, kind="Integer", minimum=1, maximum=3,
@@ -65,32 +74,62 @@ VARIABLES = (
     Variable("theta3", OUTPUT, 0.0, description="rule weight theta_3 (rule (2,1))"),
     Variable("theta4", OUTPUT, 0.0, description="rule weight theta_4 (rule (2,2))"),
     Variable("w_hat", OUTPUT, 0.0, description="approximation-error estimate (variant 3; else 0)"),
+    # appended rows (value references are table order: never reorder)
+    Variable("initial_error", PARAMETER, INITIAL_ERROR_FROM_INPUTS, kind="Integer", minimum=1, maximum=2,
+             description="e(0), de(0) of the modified error: 1 = from the inputs, checked over the first "
+                         "doSteps (host-robust, docs/host_robustness.md); 2 = pinned by e0, de0, ..."),
+    finite("e0", 0.0, description="pinned e(0) (initial_error = 2)"),
+    finite("de0", 0.0, description="pinned de(0) (initial_error = 2)"),
+    finite("d2e0", 0.0, description="pinned d2e(0) (initial_error = 2, plant order n >= 3)"),
+    finite("d3e0", 0.0, description="pinned d3e(0) (initial_error = 2, plant order n = 4)"),
 )
 
 
 class AdaptiveFuzzyController(Fmi2Slave):
     VARIABLES = VARIABLES
-    STATE_ATTRIBUTES = ("e0", "de0", "p12", "p22", "xi")
+    STATE_ATTRIBUTES = ("latch", "chatter", "p12", "p22", "xi")
     MODEL_DESCRIPTION = ("Direct adaptive fuzzy controller with variable universes of discourse "
                          "(Pan, Er, Huang, Wang, IEEE TFS 2011)")
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.e0 = self.de0 = 0.0
+        self.latch = [0.0] * latch_rule.size(len(ERROR_INPUTS))
+        self.chatter = chatter_monitor.new_state()
         self.p12 = self.p22 = 0.0
         self.xi = [0.25, 0.25, 0.25, 0.25]
 
     def initialize(self, start_time):
         _, self.p12, self.p22 = afc_math.lyapunov_p(self.k1, self.k2, self.q1, self.q2)
-        self.e0, self.de0 = self.e, self.de  # latched once (Remark 3)
+        self.latch = [0.0] * latch_rule.size(len(ERROR_INPUTS))  # n = the error vector's length
+        if self.initial_error == INITIAL_ERROR_PINNED:
+            latch_rule.pin(self.latch, start_time, [getattr(self, name) for name in INITIAL_ERROR_PARAMETERS])
+        else:  # tentative: checked over the first doSteps (Remark 3, initial_error_latch)
+            latch_rule.start(self.latch, start_time, [getattr(self, name) for name in ERROR_INPUTS])
+        chatter_monitor.start(self.chatter)
+        self.restart_adaptation()
+
+    def restart_adaptation(self):
         self.theta1 = self.theta2 = self.theta3 = self.theta4 = float(self.theta0)
         self.w_hat = 0.0
+
+    def watch_initial_error(self, time):
+        """Let the latch rule see this doStep's inputs; restart on a re-latch, warn once."""
+        events = latch_rule.observe(self.latch, time, [getattr(self, name) for name in ERROR_INPUTS])
+        if events & latch_rule.RELATCHED:
+            self.restart_adaptation()
+            self.compute_outputs()  # E, dE, xi of this step from the new latch
+        if events & latch_rule.DECIDED:
+            message = latch_rule.warning(self.latch, ERROR_INPUTS)
+            if message:
+                self.warn(message)
 
     def compute_outputs(self):
         lambda_e = self.lambda_e
         e, de = self.e, self.de
+        latch = self.latch  # x(t0) and t0 (initial_error_latch)
         error, error_rate = afc_math.modified_error(
-            e, de, self.time - self.start_time, self.e0, self.de0, lambda_e)
+            e, de, self.time - latch[latch_rule.ORIGIN], latch[latch_rule.LATCHED], latch[latch_rule.LATCHED + 1],
+            lambda_e)
         x1, x2 = afc_math.fls_inputs(e, de, self.ym, self.dym, error, error_rate, self.fls_input)
         variant = self.variant
         if variant == afc_math.VARIANT_VUD:
@@ -105,13 +144,15 @@ class AdaptiveFuzzyController(Fmi2Slave):
             u += self.w_hat
         if not (-_INF < u < _INF and -_INF < error < _INF and -_INF < error_rate < _INF):  # also NaN
             self.fail(f"outputs overflow at t = {self.time!r}: u = {u!r}, E = {error!r}, dE = {error_rate!r} "
-                      f"from e = {e!r}, de = {de!r} (latched e(0) = {self.e0!r}, de(0) = {self.de0!r}); "
+                      f"from e = {e!r}, de = {de!r} (latched e(0), de(0) = {latch_rule.latched(latch)!r}); "
                       "the inputs are out of range or the closed loop diverged")
         self.u, self.E, self.dE, self.alpha1, self.alpha2 = u, error, error_rate, alpha1, alpha2
         self.xi = xi  # a tuple; the FMU state stores it as a list
         self.outputs_stale = False
 
     def step(self, current_time, step_size):
+        if self.latch[latch_rule.OPEN]:  # the first few doSteps only
+            self.watch_initial_error(current_time)
         tau = afc_math.adaptation_signal(self.E, self.dE, self.p12, self.p22)
         gamma, m_theta, delta = self.gamma, self.m_theta, self.delta
         rate = afc_math.projected_rate
@@ -129,4 +170,6 @@ class AdaptiveFuzzyController(Fmi2Slave):
                       f"from E = {self.E!r}, dE = {self.dE!r}; theta and w_hat keep their values at t; "
                       "the inputs are out of range or the closed loop diverged")
         self.theta1, self.theta2, self.theta3, self.theta4, self.w_hat = theta1, theta2, theta3, theta4, w_hat
+        if chatter_monitor.update(self.chatter, self.u, step_size):
+            self.warn(chatter_monitor.warning(self.chatter, step_size))
         return True

@@ -339,6 +339,10 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
         raise FmuModelError(message)
 
+    def warn(self, message: str):
+        """Log ``message`` with status Warning for the host (reaches it only with logging on)."""
+        self.log(f"{self.instance_name}: {message}", Fmi2Status.warning)
+
     def _crashed(self, where: str, error: BaseException):
         """The error path of the per-step entry points (kept out of their bodies)."""
         if not isinstance(error, FmuModelError):

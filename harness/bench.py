@@ -7,9 +7,12 @@ On the same ``pendulum_case1``/``vud`` system at the same step:
 4. the floor: a bare loop of raw fmpy setReal/doStep/getReal calls on FMUs of the
    same shape whose doStep does no work (built from ``NULL_SCRIPT``);
 5. the in-process oracle (the same math, no FMI);
-each with its ratio to ours; and 6. each FMU alone (plant, reference, controller: the
+6. the native edition (C FMUs, docs/native.md): our master with them, and libcosim
+   (libcosimpy) with either edition and no worker threads, on the same exported SSP;
+each with its ratio to ours; and 7. each FMU alone (plant, reference, controller: the
 master's raw calls on that one instance) next to its null twin, which shows where the
-time of a step goes and what each FMU's Python adds to the FMI floor.  Speed targets live here, not in timed tests.
+time of a step goes and what each FMU's Python adds to the FMI floor.  Speed targets live
+here, not in timed tests.
 """
 from __future__ import annotations
 
@@ -113,16 +116,53 @@ def fmu_us_per_step(scenario, name: str, path) -> float:
         component.free()
 
 
-def master_us_per_step(scenario, algorithm: str) -> tuple[float, float]:
-    """(loop only, whole run incl. instantiation and initialisation) in microseconds per step."""
-    result = Master(scenario, algorithm).run()
+def master_us_per_step(scenario, algorithm: str, fmu_paths: dict | None = None,
+                       runs: dict | None = None) -> tuple[float, float]:
+    """(loop only, whole run incl. instantiation and initialisation) in microseconds per step.
+
+    The timed run's result is kept in ``runs[algorithm]`` (for the agreement check)."""
+    result = Master(scenario, algorithm, fmu_paths).run()
+    if runs is not None:
+        runs[algorithm] = result
     return result.us_per_step, 1e6 * result.wall_s / scenario.steps
 
 
-def oracle_us_per_step(scenario) -> float:
+def libcosim_us_per_step(package_dir: Path, scenario) -> float:
+    """libcosim's own stepping loop on a package made by libcosim_engine.with_algorithm."""
+    from .libcosim_engine import run_libcosim
+
+    return run_libcosim(package_dir, scenario.stop, scenario.step).loop_us_per_step
+
+
+def native_paths() -> dict | None:
+    """{model identifier: native FMI 2.0 FMU}, or None when zig's compiler is not installed."""
+    import build_native
+
+    if not build_native.compiler_available():
+        return None
+    return {name: paths[2] for name, paths in build_native.ensure_built().items()}
+
+
+def oracle_us_per_step(scenario, runs: dict | None = None) -> float:
     started = clock.perf_counter()
-    simulate_oracle(scenario)
-    return 1e6 * (clock.perf_counter() - started) / scenario.steps
+    result = simulate_oracle(scenario)
+    elapsed = clock.perf_counter() - started
+    if runs is not None:
+        runs["oracle"] = result
+    return 1e6 * elapsed / scenario.steps
+
+
+def oracle_disagreement(runs: dict) -> float | None:
+    """Largest |master - oracle| over the recorded signals both have, on the timed runs
+    (they compute the same loop, so this is rounding; a benchmark that timed a broken or
+    different run would show it here)."""
+    master, oracle = runs.get("feedthrough"), runs.get("oracle")
+    if master is None or oracle is None:
+        return None
+    common = [name for name in master.columns if name in oracle]
+    if len(master.time) != len(oracle["time"]) or not common:
+        return float("inf")
+    return max(float(abs(master.signal(name) - oracle[name]).max()) for name in common)
 
 
 def fmpy_ssp_us_per_step(package: Path, scenario) -> float:
@@ -193,29 +233,50 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
     figures = {"scenario": scenario.name, "controller": controller, "step": scenario.step, "stop": scenario.stop,
                "steps": scenario.steps, "repeat": repeat}
     notes = {}
+    runs = {}
     with tempfile.TemporaryDirectory(prefix="afc_bench_") as folder:
         folder = Path(folder)
-        package = ssp.export_ssp(scenario, folder / f"{scenario.name}.ssp")
+        import build_fmu
+
+        python_paths = build_fmu.ensure_built(edition="python")
+        package = ssp.export_ssp(scenario, folder / f"{scenario.name}.ssp", fmu_paths=python_paths)
         null_paths = build_null_fmus(folder)
-        real_paths = {name: resolve_fmu(spec.fmu, scenario, None) for name, spec in scenario.components.items()}
+        real_paths = {name: resolve_fmu(spec.fmu, scenario, python_paths) for name, spec in scenario.components.items()}
         per_fmu = {f"fmu_{name}{kind}": functools.partial(fmu_us_per_step, scenario, name, paths[name])
                    for name in NULL_FMUS for kind, paths in (("", real_paths), ("_null", null_paths))}
+        native = native_paths()
+        from .libcosim_engine import with_algorithm
+        libcosim_python = with_algorithm(package, folder / "libcosim_python", scenario.step, workers=0)
+        measurements = {}
+        if native is None:
+            notes["native_feedthrough"] = notes["libcosim_native"] = "no C compiler: pip install -e '.[native]'"
+        else:
+            native_package = ssp.export_ssp(scenario, folder / f"{scenario.name}_native.ssp", fmu_paths=native)
+            libcosim_native = with_algorithm(native_package, folder / "libcosim_native", scenario.step, workers=0)
+            measurements = {
+                "native_feedthrough": lambda: master_us_per_step(scenario, "feedthrough", native),
+                "libcosim_native": lambda: libcosim_us_per_step(libcosim_native, scenario),
+            }
+        measurements["libcosim_python"] = lambda: libcosim_us_per_step(libcosim_python, scenario)
         _best_of(figures, notes, {
-            "ours_feedthrough": lambda: master_us_per_step(scenario, "feedthrough"),
+            "ours_feedthrough": lambda: master_us_per_step(scenario, "feedthrough", runs=runs),
             "ours_jacobi": lambda: master_us_per_step(scenario, "jacobi"),
             "fmpy_ssp_whole": lambda: fmpy_ssp_us_per_step(package, scenario),
             "ecos": lambda: ecos_us_per_step(package, scenario),
             "floor": lambda: floor_us_per_step(scenario, null_paths),
-            "oracle": lambda: oracle_us_per_step(scenario),
+            "oracle": lambda: oracle_us_per_step(scenario, runs),
+            **measurements,
             **per_fmu,
         }, repeat)
     ours, ours_whole = figures["ours_feedthrough_us"], figures["ours_feedthrough_whole_us"]
     figures["real_time_factor"] = scenario.step / (ours * 1e-6)
-    for key in ("ours_jacobi_us", "ecos_us", "floor_us", "oracle_us"):
+    for key in ("ours_jacobi_us", "ecos_us", "floor_us", "oracle_us", "native_feedthrough_us",
+                "libcosim_native_us", "libcosim_python_us"):
         figures[key.replace("_us", "_ratio_to_ours")] = figures[key] / ours if figures.get(key) else None
     for key in ("ours_jacobi_whole_us", "fmpy_ssp_whole_us", "ecos_whole_us"):
         figures[key.replace("_us", "_ratio_to_ours")] = figures[key] / ours_whole if figures.get(key) else None
     figures["target_floor_plus_oracle_x1_5_us"] = 1.5 * (figures["floor_us"] + figures["oracle_us"])
+    figures["oracle_max_abs_difference"] = oracle_disagreement(runs)
     figures["notes"] = notes
     return figures
 
@@ -231,7 +292,10 @@ def bench_command(args) -> int:
     print(f"  {'us per step':36s} {'loop':>9s} {'x ours':>7s} {'whole run':>10s} {'x ours':>7s}")
     rows = [("our master (feedthrough)", "ours_feedthrough"), ("our master (jacobi)", "ours_jacobi"),
             ("fmpy SSP simulator", "fmpy_ssp"), ("Ecos", "ecos"),
-            ("floor: bare fmpy calls, null FMUs", "floor"), ("oracle: same math, no FMI", "oracle")]
+            ("floor: bare fmpy calls, null FMUs", "floor"), ("oracle: same math, no FMI", "oracle"),
+            ("native FMUs, our master (feedthrough)", "native_feedthrough"),
+            ("libcosim, pythonfmu FMUs, 0 workers", "libcosim_python"),
+            ("libcosim, native FMUs, 0 workers", "libcosim_native")]
 
     def cell(value, reference):
         return f"{'':>9s} {'':>7s}" if value is None else f"{value:9.2f} {value / reference:7.2f}"
@@ -243,8 +307,14 @@ def bench_command(args) -> int:
         note = figures["notes"].get(key) or figures["notes"].get(f"{key}_whole") or ""
         print(f"  {label:36s} {cell(loop, ours)} {cell(whole, ours_whole).rjust(18)} {note}")
     print(f"  real-time factor of ours: {figures['real_time_factor']:.2f}")
+    print(f"  timed runs of ours and the oracle agree within {figures['oracle_max_abs_difference']:.2g} "
+          "(largest difference of a recorded signal)")
     print(f"  target: ours <= 1.5 x (floor + oracle) = {figures['target_floor_plus_oracle_x1_5_us']:.2f} us/step; "
           f"ours {ours:.2f}")
+    native, libcosim = figures.get("native_feedthrough_us"), figures.get("libcosim_native_us")
+    if native:
+        print(f"  target: native FMUs in our master <= 8 us/step: {native:.2f}; "
+              f"in libcosim (0 workers) <= 2 us/step: {libcosim:.2f}" if libcosim else "")
     print(f"  {'one FMU alone, us per step':36s} {'FMU':>9s} {'null FMU':>9s} {'difference':>10s}")
     for name in NULL_FMUS:
         own, null = figures.get(f"fmu_{name}_us"), figures.get(f"fmu_{name}_null_us")

@@ -73,10 +73,10 @@ def register_run(commands):
 
 def _subcommand_registrations():
     """Each subcommand lives in its own module with a ``register(commands)`` function."""
-    from . import bench, engines, regression, report_tables, ssp, sweep
+    from . import bench, engines, mutation, regression, report_tables, ssp, sweep
 
     return [register_run, report_tables.register, sweep.register, regression.register, ssp.register,
-            engines.register, bench.register]
+            engines.register, bench.register, mutation.register]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -85,12 +85,42 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True)
     for register in _subcommand_registrations():
         register(commands)
+    for command in commands.choices.values():
+        add_edition_argument(command)
     return parser
+
+
+def add_edition_argument(parser: argparse.ArgumentParser) -> None:
+    """``--edition``: which FMUs the command runs (one option, shared by every command)."""
+    parser.add_argument("--edition", choices=("python", "native", "native3"), default=None,
+                        help="python: the pythonfmu FMUs (reference edition); native: the C FMUs, FMI 2.0; "
+                             "native3: the C FMUs, FMI 3.0 (our master only; docs/native.md); "
+                             "default: $AFC_EDITION, else python")
+
+
+def apply_edition(args):
+    """Select the edition for this command and the worker processes it starts; returns an undo."""
+    import os
+
+    import build_fmu
+
+    name = build_fmu.EDITION_VARIABLE
+    before = os.environ.get(name)
+    if getattr(args, "edition", None):
+        os.environ[name] = args.edition
+
+    def undo():
+        if before is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = before
+    return undo
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    undo = apply_edition(args)
     try:
         return args.handler(args)
     except scenarios.ScenarioError as error:
@@ -99,3 +129,10 @@ def main(argv=None) -> int:
     except FileNotFoundError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
+    except RuntimeError as error:
+        if type(error).__name__ != "NativeBuildError":
+            raise
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    finally:
+        undo()

@@ -18,11 +18,13 @@ fmpy's SSP simulator (``simulate_ssp``)
     .ssv files) and passes them, so the package runs unchanged.
   * starts every connector at 0 and never propagates values before
     ``fmi2ExitInitializationMode``: a controller whose start inputs are not
-    set latches e(0) = de(0) = 0 and the modified error of Remark 3 is off.
-    ``export-ssp`` therefore writes consistent start values of the connected
-    inputs (``--start-inputs``, default).  Even then the connectors are 0
-    during the first two steps (the reference sees y = 0 at the first step),
-    a short start transient no parameter can remove.
+    set sees e = de = 0 at initialisation and re-latches e(0), de(0) from the
+    first inputs that agree with their derivatives, two steps late, with a
+    warning (docs/host_robustness.md).  ``export-ssp`` therefore writes
+    consistent start values of the connected inputs (``--start-inputs``,
+    default).  Even then the connectors are 0 during the first two steps (the
+    reference sees y = 0 at the first step); the controller then goes back
+    to the start values and restarts its adaptation, so no trace is left.
   * each step sets inputs, calls doStep and reads outputs component by
     component, then copies along the connections: every connection is
     delayed by one step (Jacobi, like our ``--algorithm jacobi``).

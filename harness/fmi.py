@@ -10,6 +10,7 @@ or exceptions per step.
 """
 from __future__ import annotations
 
+import ctypes
 import functools
 import shutil
 import tempfile
@@ -22,6 +23,7 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE,
 from fmpy.fmi2 import defaultCallbacks as _fmpy_default_callbacks
 
 STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal", "pending")
+FMI3_TYPE_NAMES = {"Float64": "Real", "Int32": "Integer"}
 FMI_ERROR = 3
 
 
@@ -47,6 +49,7 @@ class ModelInfo:
     variables: dict  # name -> fmpy ScalarVariable
     direct_dependencies: dict  # output name -> tuple of input names it depends on directly
     can_get_set_state: bool
+    fmi_version: str = "2.0"  # "3.0": driven through fmpy's FMU3Slave (the native edition's FMI 3.0 FMUs)
 
     @classmethod
     def read(cls, path) -> "ModelInfo":
@@ -56,6 +59,9 @@ class ModelInfo:
         md = read_model_description(str(path))
         if md.coSimulation is None:
             raise ValueError(f"{path.name} is not a co-simulation FMU")
+        if md.fmiVersion.startswith("3"):
+            for v in md.modelVariables:  # the FMI 2.0 type names the harness checks
+                v.type = FMI3_TYPE_NAMES.get(v.type, v.type)
         variables = {v.name: v for v in md.modelVariables}
         inputs = tuple(v.name for v in md.modelVariables if v.causality == "input")
         dependencies = {}
@@ -67,7 +73,7 @@ class ModelInfo:
                 dependencies[unknown.variable.name] = tuple(
                     d.name for d in unknown.dependencies if d.causality == "input")
         return cls(path, md.coSimulation.modelIdentifier, md.guid, variables, dependencies,
-                   bool(md.coSimulation.canGetAndSetFMUstate))
+                   bool(md.coSimulation.canGetAndSetFMUstate), md.fmiVersion)
 
 
 @dataclass
@@ -80,18 +86,25 @@ class Component:
     log: list = field(default_factory=list)
     time: float = 0.0
 
+    @property
+    def fmi3(self) -> bool:
+        return self.info.fmi_version.startswith("3")
+
     def instantiate(self, logging_on: bool = False):
         """Extract and instantiate; on failure the extraction is removed before the error propagates."""
         self.unzip_dir = tempfile.mkdtemp(prefix=f"afc_{self.name}_")
         try:
-            self._instantiate(logging_on)
+            extract(str(self.info.path), self.unzip_dir)
+            if self.fmi3:
+                self._instantiate3(logging_on)
+            else:
+                self._instantiate2(logging_on)
         except BaseException:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)
             raise
         return self
 
-    def _instantiate(self, logging_on: bool):
-        extract(str(self.info.path), self.unzip_dir)
+    def _instantiate2(self, logging_on: bool):
         self.slave = self._call("loading the FMU's shared library", lambda: FMU2Slave(
             guid=self.info.guid, unzipDirectory=self.unzip_dir,
             modelIdentifier=self.info.model_identifier, instanceName=self.name))
@@ -106,6 +119,27 @@ class Component:
         self._raw_get_real = functions["fmi2GetReal"]
         self._raw_do_step = functions["fmi2DoStep"]
         self._component = self.slave.component
+
+    def _instantiate3(self, logging_on: bool):
+        """FMI 3.0 co-simulation through fmpy's FMU3Slave; the same per-step interface."""
+        from fmpy.fmi3 import FMU3Slave, fmi3Boolean, fmi3Float64
+
+        self.slave = self._call("loading the FMU's shared library", lambda: FMU3Slave(
+            guid=self.info.guid, unzipDirectory=self.unzip_dir,
+            modelIdentifier=self.info.model_identifier, instanceName=self.name))
+        self._call("fmi3InstantiateCoSimulation", lambda: self.slave.instantiate(
+            loggingOn=logging_on, logMessage=self._log_message3))
+        functions = self.slave._functions
+        self._raw_set_real = functions["fmi3SetFloat64"]
+        self._raw_get_real = functions["fmi3GetFloat64"]
+        self._raw_do_step3 = functions["fmi3DoStep"]
+        self._component = self.slave.component
+        self._step_outputs = tuple(ctypes.byref(value) for value in
+                                   (fmi3Boolean(), fmi3Boolean(), fmi3Boolean(), fmi3Float64()))
+        return self
+
+    def _log_message3(self, env, status, category, message):
+        self._log_message(env, None, status, category, message)
 
     def _log_message(self, env, instance, status, category, message):
         label = STATUS_NAMES[status].upper() if 0 <= status < len(STATUS_NAMES) else str(status)
@@ -124,6 +158,10 @@ class Component:
 
     def setup(self, start_time: float, stop_time: float | None = None):
         self.time = start_time
+        if self.fmi3:
+            self._call("fmi3EnterInitializationMode",
+                       lambda: self.slave.enterInitializationMode(startTime=start_time, stopTime=stop_time))
+            return
         self._call("fmi2SetupExperiment", lambda: self.slave.setupExperiment(startTime=start_time, stopTime=stop_time))
         self._call("fmi2EnterInitializationMode", self.slave.enterInitializationMode)
 
@@ -131,7 +169,11 @@ class Component:
         for name, value in values.items():
             variable = self.info.variables[name]
             vr = [variable.valueReference]
-            if variable.type == "Integer":
+            if variable.type == "Integer" and self.fmi3:
+                self._call("fmi3SetInt32", lambda: self.slave.setInt32(vr, [int(value)]))
+            elif variable.type == "Real" and self.fmi3:
+                self._call("fmi3SetFloat64", lambda: self.slave.setFloat64(vr, [float(value)]))
+            elif variable.type == "Integer":
                 self._call("fmi2SetInteger", lambda: self.slave.setInteger(vr, [int(value)]))
             elif variable.type == "Boolean":
                 self._call("fmi2SetBoolean", lambda: self.slave.setBoolean(vr, [bool(value)]))
@@ -159,18 +201,30 @@ class Component:
         values = (fmi2Real * count)()
         return references, values, count
 
+    def _bound_array_call(self, function, names) -> tuple:
+        """(values array, call): ``function(instance, references, count, values[, count])`` with every
+        argument prepared once as a ctypes object and no per-call argument conversion (a C
+        function pointer without argtypes: 0.4 us per call instead of 0.9 us through fmpy's)."""
+        references, values, count = self.real_buffer(names)
+        bare = ctypes.CFUNCTYPE(ctypes.c_int)(ctypes.cast(function, ctypes.c_void_p).value)
+        arguments = [ctypes.c_void_p(self._component), references, ctypes.c_size_t(count), values]
+        if self.fmi3:
+            arguments.append(ctypes.c_size_t(count))
+        return values, functools.partial(bare, *arguments)
+
     def real_reader(self, names) -> tuple:
         """(values array, call) where call() reads ``names`` into values and returns the status."""
-        references, values, count = self.real_buffer(names)
-        return values, functools.partial(self._raw_get_real, self._component, references, count, values)
+        return self._bound_array_call(self._raw_get_real, names)
 
     def real_writer(self, names) -> tuple:
         """(values array, call) where call() writes values to ``names`` and returns the status."""
-        references, values, count = self.real_buffer(names)
-        return values, functools.partial(self._raw_set_real, self._component, references, count, values)
+        return self._bound_array_call(self._raw_set_real, names)
 
     def stepper(self):
-        """call(time, step, 1) -> status: fmi2DoStep bound to this instance."""
+        """call(time, step, 1) -> status: fmi2DoStep (or fmi3DoStep) bound to this instance."""
+        if self.fmi3:
+            do_step, component, outputs = self._raw_do_step3, self._component, self._step_outputs
+            return lambda time, step, no_prior_state: do_step(component, time, step, no_prior_state, *outputs)
         return functools.partial(self._raw_do_step, self._component)
 
     def fail(self, function: str, status: int, time: float):

@@ -76,7 +76,9 @@ def simulate_oracle(scenario: Scenario, algorithm: str = "feedthrough") -> dict:
     theta, w_hat = [float(controller["theta0"])] * 4, 0.0
     # initial values propagated in dependency order (both algorithms)
     ym, dym, e, de = reference_outputs(start, x1, x2)
-    p = dict(controller, e0=e, de0=de)
+    if controller.get("initial_error", 1) != 2:  # 2: pinned by the parameters e0, de0
+        controller = dict(controller, e0=e, de0=de)  # consistent start inputs: the latch keeps them
+    p = controller
     held_reference = (x1, x2)
     held_controller = (e, de, ym, dym)
     held_u = afc_math.controller_output(e, de, ym, dym, 0.0, theta, w_hat, p)[0]

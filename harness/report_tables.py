@@ -2,7 +2,9 @@
 
 ``python -m harness tables [--out DIR] [--jobs N]`` runs the 12 co-simulations
 (4 scenarios x vud, fixed, fae) in parallel processes and writes table1.csv,
-table2.csv, report.md and figures like the paper's Figs. 4-8 to DIR.
+table2.csv, report.md and figures like the paper's Figs. 4-8 to DIR.  It also
+runs each case at half its step (and, with ``--refine``, the cases an open claim
+needs finer still): harness/claims.py decides the paper's claims on those ladders.
 
 ``python -m harness convergence [SCENARIO...]`` is the step-size study: per
 scenario and controller the scores on a ladder of halving steps until
@@ -22,6 +24,7 @@ import sys
 import time as clock
 from pathlib import Path
 
+from . import claims as claims_module
 from . import scenario as scenarios
 from .cases import Case, default_jobs, parallel_map, run_cases
 
@@ -35,8 +38,6 @@ TABLE_COLUMNS = ("scenario", "controller", "ts", "es1_pct", "es2_pct", "ITAE", "
                  "umax", "tv_u", "step", "largest_stable_step", "status")
 PAPER_METRICS = ("ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec")
 CONVERGENCE_TOLERANCE = 0.005  # halving the step changes ITAE, IAE and Ec by less than 0.5 %
-DISTURBANCE_TOLERANCE = 0.10  # "barely changes": ITAE and IAE within 10 % of case 1
-SMOOTHNESS_TOLERANCE = 1.10  # "smooth": tv_u at most 10 % above the smoothest comparison controller
 CONTROLLER_NAMES = {"vud": "proposed AFC (variable universes)", "fixed": "stand-in for [46] (fixed universes)",
                     "fae": "stand-in for [28] (fixed universes + error estimator)"}
 
@@ -87,61 +88,6 @@ def paper_table(rows: list, scenario: str) -> str:
         lines.append("| " + " | ".join([row["controller"], *(_fmt(row[k]) for k in PAPER_METRICS),
                                          _fmt(row["umax"]), _fmt(row["tv_u"])]) + " |")
     return "\n".join(lines)
-
-
-def claims_check(rows: list) -> list:
-    """Each claim of the paper (SPEC section 7) with its verdict and the numbers that decide it."""
-    by = {(r["scenario"], r["controller"]): r for r in rows}
-    ok = all(r["status"] == "ok" for r in rows)
-    claims = []
-
-    def best(metric, scenario_list, label):
-        details, verdict = [], ok
-        for name in scenario_list:
-            values = {c: by[(name, c)].get(metric) for c in CONTROLLERS}
-            if any(v is None for v in values.values()):
-                verdict = False
-                continue
-            others = min(values["fixed"], values["fae"])
-            wins = values["vud"] < others
-            verdict = verdict and wins
-            details.append(f"{name}: vud {_fmt(values['vud'])} vs fixed {_fmt(values['fixed'])}, "
-                           f"fae {_fmt(values['fae'])} ({'best' if wins else 'not best'})")
-        claims.append((label, verdict, details))
-
-    best("ts", ALL_SCENARIOS, "The proposed AFC has the shortest settling time ts in all four scenarios")
-    best("es1_pct", ALL_SCENARIOS, "The proposed AFC has the smallest steady-state error es1 in all four scenarios")
-    best("es2_pct", ALL_SCENARIOS, "The proposed AFC has the smallest steady-state error es2 in all four scenarios")
-    best("ITAE", ALL_SCENARIOS, "The proposed AFC has the smallest ITAE in all four scenarios")
-    best("IAE", ALL_SCENARIOS, "The proposed AFC has the smallest IAE in all four scenarios")
-    best("Ec", PENDULUM, "The proposed AFC needs the least control energy Ec for the pendulum (cases 1-3)")
-    details, verdict = [], ok
-    for controller in CONTROLLERS:
-        one, two = by[("pendulum_case1", controller)], by[("pendulum_case2", controller)]
-        changes = []
-        for metric in ("ITAE", "IAE"):
-            if one.get(metric) and two.get(metric) is not None:
-                change = two[metric] / one[metric] - 1.0
-                changes.append(f"{metric} {100 * change:+.1f} %")
-                if controller == "vud":
-                    verdict = verdict and abs(change) < DISTURBANCE_TOLERANCE
-        details.append(f"{controller}: case 2 vs case 1: {', '.join(changes)}")
-    claims.append((f"The disturbance barely changes the proposed AFC's tracking (case 2 vs case 1: "
-                   f"ITAE and IAE within {100 * DISTURBANCE_TOLERANCE:.0f} %)", verdict, details))
-    details, verdict = [], ok
-    for name in ALL_SCENARIOS:
-        values = {c: by[(name, c)].get("tv_u") for c in CONTROLLERS}
-        if any(v is None for v in values.values()):
-            verdict = False
-            continue
-        smooth = values["vud"] <= SMOOTHNESS_TOLERANCE * min(values["fixed"], values["fae"])
-        verdict = verdict and smooth
-        details.append(f"{name}: TV(u)/s vud {_fmt(values['vud'])} vs fixed {_fmt(values['fixed'])}, "
-                       f"fae {_fmt(values['fae'])} ({'smooth' if smooth else 'rougher'})")
-    claims.append((f"The proposed AFC's control input is smooth (total variation of u per second at most "
-                   f"{100 * (SMOOTHNESS_TOLERANCE - 1):.0f} % above the smoother comparison controller)",
-                   verdict, details))
-    return claims
 
 
 def figures(rows: list, out: Path) -> list:
@@ -205,10 +151,19 @@ def peak_memory_mib() -> float:
     return max(own, children) / 1024.0
 
 
-def report_markdown(rows: list, convergence: dict, figure_paths: list, wall_s: float, jobs: int,
+CLAIMS_METHOD = (
+    "Each claim is decided on step ladders: every case also runs at half the scenario's step, and a "
+    "case that an open claim needs at a further half (`--refine`). A score is its value at the finest "
+    "step run, ± its numerical error: the change of that score over the last halving (the loop is "
+    "first order in the step). A comparison is decided only when the gap exceeds the sum of both "
+    "errors; otherwise it is *not decided at this accuracy*. The tables above are at the scenario's step.")
+
+
+def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: list, wall_s: float, jobs: int,
                     peak_mib: float = float("nan")) -> str:
     parts = ["# Table I / Table II: co-simulation report", "",
-             f"Generated by `python -m harness tables` in {wall_s:.1f} s wall on {jobs} processes "
+             f"Generated by `python -m harness tables` in {wall_s:.1f} s wall (with the claims' step ladders) "
+             f"on {jobs} processes "
              f"(peak memory of the largest process {peak_mib:.0f} MiB). "
              "Each row is one FMI co-simulation (controller, plant and reference FMUs coupled by the "
              "feedthrough-aware master) from 0 to 20 s at the scenario's communication step.", ""]
@@ -216,10 +171,8 @@ def report_markdown(rows: list, convergence: dict, figure_paths: list, wall_s: f
     for name in PENDULUM:
         parts += [f"### {name}: {scenarios.load(name).description}", "", paper_table(rows, name), ""]
     parts += ["## Table II: single-link manipulator with friction", "", paper_table(rows, "manipulator"), ""]
-    parts += ["## Claims of the paper, checked", ""]
-    for label, verdict, details in claims_check(rows):
-        parts.append(f"- **{'reproduced' if verdict else 'not reproduced'}**: {label}.")
-        parts += [f"  - {d}" for d in details]
+    parts += ["## Claims of the paper, checked", "", CLAIMS_METHOD, ""]
+    parts += claims_module.claims_markdown(claims)
     parts += ["", "## Choices the numbers depend on", "", choices_text(), ""]
     parts += ["## Communication step and stability", ""]
     if convergence:
@@ -233,16 +186,53 @@ def report_markdown(rows: list, convergence: dict, figure_paths: list, wall_s: f
     return "\n".join(parts) + "\n"
 
 
+def half_step_case(case: Case) -> Case:
+    """The same case at half its step (no figure signals): the error estimate of the claims."""
+    return Case(case.scenario, case.controller, step=case.build().step / 2, stop=case.stop)
+
+
+def case_cost(case: Case) -> int:
+    return case.build().steps
+
+
+def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int) -> tuple[list, list]:
+    """(claims, refined cases): up to ``levels`` further halvings of the step for the cases a
+    claim still open needs (``ladders`` gains their runs)."""
+    claims = claims_module.claims_check(ladders)
+    refined = []
+    for _ in range(levels):
+        open_cases = claims_module.undecided_cases(claims)
+        if not open_cases:
+            break
+        finer = [Case(name, controller, step=min(o["step"] for o in ladders[(name, controller)]) / 2, stop=stop)
+                 for name, controller in sorted(open_cases)]
+        for outcome in run_cases(sorted(finer, key=case_cost, reverse=True), jobs=jobs,
+                                 description="claims: finer steps"):
+            ladders[(outcome["scenario"], outcome["controller"])].append(outcome)
+            refined.append((outcome["scenario"], outcome["controller"], outcome["step"]))
+        claims = claims_module.claims_check(ladders)
+    return claims, refined
+
+
 def tables_command(args) -> int:
+    if args.refine < 0:
+        print(f"error: --refine {args.refine} is invalid; give 0 (decide on h and h/2 only) or more levels",
+              file=sys.stderr)
+        return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     jobs = args.jobs or default_jobs()
-    # the longest runs first (the manipulator's step is 8x finer), so both cores finish together
-    longest_first = sorted(ALL_SCENARIOS, key=lambda name: scenarios.load(name).steps, reverse=True)
     cases = [Case(name, controller, stop=args.stop, figure_interval=0.01)
-             for name in longest_first for controller in CONTROLLERS]
+             for name in ALL_SCENARIOS for controller in CONTROLLERS]
+    # every case at h (the tables) and at h/2 (the claims' error estimates) in one pool,
+    # the longest runs first, so both cores finish together
+    runs = sorted([*cases, *map(half_step_case, cases)], key=case_cost, reverse=True)
     started = clock.perf_counter()
-    rows = run_cases(cases, jobs=jobs, description="Table I/II co-simulations")
+    outcomes = dict(zip(runs, run_cases(runs, jobs=jobs, description="Table I/II co-simulations and half steps")))
+    rows = [outcomes[case] for case in cases]
+    ladders = claims_module.ladders_from_rows([outcomes[case] for case in runs])
+    ladder_s = clock.perf_counter() - started
+    claims, refined = refine_open_claims(ladders, args.stop, jobs, args.refine)
     wall_s = clock.perf_counter() - started
     peak_mib = peak_memory_mib()
     convergence = load_convergence()
@@ -251,14 +241,17 @@ def tables_command(args) -> int:
     write_table(out / "table1.csv", [r for r in rows if r["scenario"] in PENDULUM])
     write_table(out / "table2.csv", [r for r in rows if r["scenario"] == "manipulator"])
     figure_paths = figures(rows, out)
-    (out / "report.md").write_text(report_markdown(rows, convergence, figure_paths, wall_s, jobs, peak_mib))
-    print(f"12 co-simulations in {wall_s:.1f} s wall on {jobs} processes; peak memory {peak_mib:.0f} MiB "
-          "(largest process)")
+    (out / "report.md").write_text(report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib))
+    print(f"{len(rows)} co-simulations and the same at half the step in {ladder_s:.1f} s, {len(refined)} finer "
+          f"for open claims in {wall_s - ladder_s:.1f} s: {wall_s:.1f} s wall on {jobs} processes; peak memory "
+          f"{peak_mib:.0f} MiB (largest process)")
     for name in ALL_SCENARIOS:
         print(f"\n{name}\n{paper_table(rows, name)}")
-    print("\nclaims:")
-    for label, verdict, _ in claims_check(rows):
-        print(f"  {'reproduced    ' if verdict else 'NOT reproduced'}  {label}")
+    print("\nclaims (decided on the step ladders, see the report):")
+    for claim in claims:
+        print(f"  {claim.verdict:29s} {claim.label}")
+    if refined:
+        print("refined for open claims: " + ", ".join(f"{s}/{c} at {h:g} s" for s, c, h in refined))
     print(f"\nwritten: {out / 'table1.csv'}, {out / 'table2.csv'}, {out / 'report.md'}, "
           f"{len(figure_paths)} figures")
     failed = [r for r in rows if r["status"] != "ok"]
@@ -436,6 +429,9 @@ def register(commands):
     tables.add_argument("--out", default="results", help="output folder (default results/)")
     tables.add_argument("--jobs", type=int, help="parallel processes (default: every core)")
     tables.add_argument("--stop", type=float, help="shorter horizon (tests); default the scenarios' 20 s")
+    tables.add_argument("--refine", type=int, default=1, metavar="LEVELS",
+                        help="further halvings of the step for the cases an open claim needs (default 1; 0: "
+                             "decide on h and h/2 only)")
     tables.set_defaults(handler=tables_command)
     study = commands.add_parser("convergence", help="step-size study and largest stable steps")
     study.add_argument("scenarios", nargs="*", help=f"default: {', '.join(ALL_SCENARIOS)}")

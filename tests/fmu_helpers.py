@@ -10,7 +10,7 @@ from fmpy.fmi2 import defaultCallbacks
 class Driven:
     """An instantiated FMU with name-based set/get and captured log messages."""
 
-    def __init__(self, path, instance_name="instance", unzip_dir=None):
+    def __init__(self, path, instance_name="instance", unzip_dir=None, logging_on=True):
         self.md = read_model_description(str(path))
         self.unzip_dir = unzip_dir or extract(str(path))
         # an extraction of its own is removed by free(), else when the helper is forgotten or at exit
@@ -27,7 +27,7 @@ class Driven:
         callbacks.allocateMemory = defaultCallbacks.allocateMemory
         callbacks.freeMemory = defaultCallbacks.freeMemory
         self._callbacks = callbacks
-        self.slave.instantiate(callbacks=callbacks, loggingOn=True)
+        self.slave.instantiate(callbacks=callbacks, loggingOn=logging_on)
 
     def _log(self, env, instance, status, category, message):
         self.messages.append((status, message.decode("utf-8", "replace")))

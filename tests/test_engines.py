@@ -55,8 +55,9 @@ def test_ecos_and_our_jacobi_master_agree_inside_the_tube_and_to_rounding(runs):
 def test_fmpy_ssp_simulator_agrees_with_our_jacobi_master_after_its_start_transient(runs):
     comparisons = engines.compare_results(runs["jacobi"], runs["fmpy"], from_time=SKIP, every=EVERY)
     assert not failing(comparisons), failing(comparisons)
-    # the two steps with zero connectors leave a trace: visible, yet inside the tube
-    assert 1e-4 < engines.max_deviation(runs["jacobi"], runs["fmpy"], "controller.theta1", SKIP) < 0.05
+    # after the two steps with zero connectors the controller goes back to the package's start values
+    # and restarts its adaptation (docs/host_robustness.md): no trace is left (7e-7 measured)
+    assert engines.max_deviation(runs["jacobi"], runs["fmpy"], "controller.theta1", SKIP) < 1e-5
 
 
 def test_our_default_feedthrough_master_agrees_with_both_engines_at_a_small_step(runs):
@@ -92,23 +93,23 @@ def test_fmpy_stamps_each_row_with_the_time_before_the_step_that_produced_it(run
     assert any("too many" in note or "steps for" in note for note in fmpy.notes)
 
 
-def test_fmpy_starts_connectors_at_zero_so_the_controller_latches_e0_zero(packages):
+def test_fmpy_starts_connectors_at_zero_and_the_controller_relatches_e0(packages):
     without = engines.run_fmpy_ssp(packages[False], stop=1.0)
     with_start = engines.run_fmpy_ssp(packages[True], stop=1.0)
     jacobi = engines.run_master(loop(stop=1.0, step=1e-4), "jacobi")
-    # modification off: the controller's E is exactly the e it was given (reference.e one row earlier)
+    # without start values the controller sees e = 0 at initialisation and for two steps, then re-latches
+    # e(0), de(0) from the first inputs that agree with their derivatives (docs/host_robustness.md): the
+    # modification is on, E is not the e it was given (it was, before: ITAE 1.37 x over 1 s)
     E, e = without.signal("controller.E"), without.signal("reference.e")
-    assert np.array_equal(E[2:], e[1:-1])
-    # with the start inputs from the package, E is the modified error: not e
-    assert np.max(np.abs(with_start.signal("controller.E")[2:] - with_start.signal("reference.e")[1:-1])) > 0.1
+    assert np.max(np.abs(E[3:] - e[2:-1])) > 0.1
     itae = {name: engines.engine_scores(r)["ITAE"] for name, r in
             (("without", without), ("with", with_start), ("jacobi", jacobi))}
-    assert itae["without"] > 1.25 * itae["jacobi"]  # 1.37 x over 1 s: the paper's controller is not what runs
+    assert itae["without"] == pytest.approx(itae["jacobi"], rel=2e-3)  # -0.04 % measured
     assert itae["with"] == pytest.approx(itae["jacobi"], rel=2e-3)
-    # the start transient kicks the rule weights by O(h): at 1e-4 s theta1, theta2 leave the tube, nothing else
-    thetas = {f"controller.theta{k}" for k in range(1, 5)}
-    assert set(failing(engines.compare_results(jacobi, with_start, from_time=3e-4))) <= thetas
-    assert {"plant.y", "controller.u"} <= set(failing(engines.compare_results(jacobi, without, from_time=3e-4)))
+    # with the start values the controller goes back to them after the two zero steps: inside every tube;
+    # without them the time origin is two steps late: the plant's rate leaves the tube by ~3e-4 early on
+    assert not failing(engines.compare_results(jacobi, with_start, from_time=3e-4))
+    assert set(failing(engines.compare_results(jacobi, without, from_time=3e-4))) <= {"plant.dy"}
 
 
 def test_fmpy_simulate_ssp_does_not_apply_the_package_parameter_bindings_by_itself(packages):

@@ -226,18 +226,23 @@ def test_divergence_through_the_cli_ends_in_bounded_time_without_a_nan_row(fmu_p
         assert np.all(np.abs(table[:, connected]) < 1e8)  # the scenario files' divergence_bound
 
 
-def test_manipulator_vud_at_2_ms_chatters_but_does_not_diverge(fmu_paths):
+def test_manipulator_vud_at_2_ms_chatters_but_the_projection_keeps_it_bounded(fmu_paths):
     """A documented observation, not a wish: at a 2 ms step the stiff manipulator loop with
     the proposed controller chatters (u switches sign hundreds of times per second) but stays
-    bounded, because the projection keeps |theta_j| near m_theta + delta = 205 and u is a
-    convex combination of the theta_j; explicit Euler overshoots that bound a little."""
+    bounded.  With the paper's m_theta = 200 theta only reaches about 120 in 5 s, so the
+    projection is never tested; with m_theta = 60 theta runs into the boundary layer (31) and
+    the projection holds |theta_j| within m_theta + delta = 65 (explicit Euler may overshoot a
+    little: 1 %), and u, a convex combination of the theta_j, within that too."""
+    m_theta, delta = 60.0, 5.0
     scenario = scenarios.load("manipulator").with_controller("vud").with_parameter("step", 0.002) \
-        .with_parameter("stop", 5.0)
+        .with_parameter("stop", 5.0).with_parameter("controller.m_theta", m_theta) \
+        .with_parameter("controller.delta", delta)
     result = simulate(scenario, fmu_paths=fmu_paths)
     assert result.complete and np.all(np.isfinite(result.values))
     u = result.signal("controller.u")
     theta = np.column_stack([result.signal(f"controller.theta{j}") for j in range(1, 5)])
-    assert np.max(np.abs(u)) <= np.max(np.abs(theta)) <= 205.0 * 1.01
+    assert theta.max() > m_theta and theta.min() < -m_theta  # the projection acts on both sides
+    assert np.max(np.abs(u)) <= np.max(np.abs(theta)) <= (m_theta + delta) * 1.01
     sign_changes_per_s = np.count_nonzero(np.diff(np.sign(u[len(u) // 2:])) != 0) / 2.5
     assert sign_changes_per_s > 100, sign_changes_per_s
 

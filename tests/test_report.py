@@ -1,12 +1,13 @@
 """End-to-end: `tables` and `convergence` on a shortened horizon (issue 5)."""
 import csv
 import json
+import re
 
 from harness.cli import main as cli_main
 
 
 def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys):
-    code = cli_main(["tables", "--out", str(tmp_path), "--stop", "0.3", "--jobs", "2"])
+    code = cli_main(["tables", "--out", str(tmp_path), "--stop", "0.3", "--jobs", "2", "--refine", "0"])
     out = capsys.readouterr().out
     assert code == 0
     for name, scenarios in (("table1.csv", {"pendulum_case1", "pendulum_case2", "pendulum_case3"}),
@@ -22,11 +23,16 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys):
     report = (tmp_path / "report.md").read_text()
     assert "## Table I: inverted pendulum" in report and "## Table II" in report
     assert "## Claims of the paper, checked" in report
-    assert report.count("reproduced**") >= 8  # every claim has a verdict
+    verdicts = re.findall(r"(?m)^- \*\*([^*]+)\*\*: The ", report)
+    assert len(verdicts) == 8, verdicts  # every claim has exactly one verdict...
+    assert set(verdicts) <= {"reproduced", "not reproduced", "not decided at this accuracy"}, verdicts
+    assert report.count(" ± ") >= 8 * 3  # ...stated with the numbers and their errors
+    assert "(h = 0.0002 s" in report and "(h = 2.5e-05 s" in report  # decided on the h/2 runs
+    assert "(h = 0.0004 s" not in report and "(h = 0.0001 s" not in report
     for name in ("pendulum_case1", "pendulum_case2", "pendulum_case3", "manipulator"):
         assert (tmp_path / f"{name}.png").stat().st_size > 10_000
         assert f"({name}.png)" in report
-    assert "claims:" in out
+    assert "claims (decided on the step ladders" in out
 
 
 def test_convergence_study_finds_a_step_and_stable_steps(fmu_paths, tmp_path):

@@ -1,0 +1,309 @@
+/* AdaptiveFuzzyController: the variable-universe direct adaptive fuzzy controller of
+ * Pan, Er, Huang, Wang (IEEE TFS 19(5), 2011) as a native FMU: the C twin of
+ * adaptive_fuzzy_controller_fmu.py.  The math is in afc_math.c; this file only adapts
+ * it to the FMI layer.
+ *
+ * Co-simulation semantics (as the Python edition):
+ * - u, E, dE, alpha depend directly on the inputs at the same communication point;
+ * - doStep(t, h) advances theta (and w_hat for variant 3) with the inputs held at t:
+ *   theta += h dtheta(t) (explicit Euler, the sampled-data update of an embedded target);
+ * - e(0), de(0), ... of the modified error (Remark 3) are latched when initialisation ends.
+ *
+ * General form (issue 17): the order n and the number of sets m come from the parameters
+ * `order` and `sets` when the declaration table has them, else n = 2, m = 2; the rule
+ * weights are the table's theta1..thetaN (M = m^n <= N).
+ */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "afc_math.h"
+#include "chatter_monitor.h"
+#include "fmi_layer.h"
+#include "initial_error_latch.h"
+
+/* Host robustness (issue 13): with the table's parameter initial_error, e(0), de(0), ... and the
+ * time origin of the modified error come from initial_error_latch (checked over the first
+ * doSteps, or pinned by e0, de0, ...), and chatter_monitor watches u; without it, e(0), de(0)
+ * are the inputs at the end of initialisation, for good. */
+#ifdef VR_initial_error
+#define HOST_ROBUST 1
+#define INITIAL_ERROR_PINNED 2
+#else
+#define HOST_ROBUST 0
+#endif
+
+/* the internal state (STATE_ATTRIBUTES: latch, chatter, P, xi) */
+typedef struct {
+    InitialErrorLatch latch;        /* x(t0) = e(0), de(0), ... and t0 (Remark 3) */
+    ChatterMonitor chatter;         /* chatter statistic of u */
+    double p[MAX_ORDER][MAX_ORDER]; /* P of (30) */
+    double xi[MAX_RULES];           /* the basis (8) at the last output evaluation */
+} ControllerState;
+
+#define STATE(m) ((ControllerState *)(m)->internal)
+
+const size_t MODEL_INTERNAL_BYTES = sizeof(ControllerState);
+
+/* value references of e, de, d2e, d3e; ym, dym, ...; E, dE, ...  (those the table has) */
+static const int ERROR_VR[] = {VR_e, VR_de,
+#ifdef VR_d2e
+                               VR_d2e,
+#endif
+#ifdef VR_d3e
+                               VR_d3e,
+#endif
+};
+static const int REFERENCE_VR[] = {VR_ym, VR_dym,
+#ifdef VR_d2ym
+                                   VR_d2ym,
+#endif
+#ifdef VR_d3ym
+                                   VR_d3ym,
+#endif
+};
+static const int MODIFIED_ERROR_VR[] = {VR_E, VR_dE,
+#ifdef VR_d2E
+                                        VR_d2E,
+#endif
+#ifdef VR_d3E
+                                        VR_d3E,
+#endif
+};
+#define SUPPORTED_ORDER ((int)(sizeof ERROR_VR / sizeof ERROR_VR[0]))
+static const char *const ERROR_NAMES[] = {"e", "de", "d2e", "d3e"};
+#if HOST_ROBUST
+static const int PINNED_ERROR_VR[] = {VR_e0, VR_de0,
+#ifdef VR_d2e0
+                                      VR_d2e0,
+#endif
+#ifdef VR_d3e0
+                                      VR_d3e0,
+#endif
+};
+#endif
+
+static int order_of(ModelInstance *m) {
+#ifdef VR_order
+    return (int)V(m, order);
+#else
+    (void)m;
+    return 2;
+#endif
+}
+
+static int sets_of(ModelInstance *m) {
+#ifdef VR_sets
+    return (int)V(m, sets);
+#else
+    (void)m;
+    return 2;
+#endif
+}
+
+static int rules_of(int n, int sets) {
+    int rules = 1;
+    for (int i = 0; i < n; i++) rules *= sets;
+    return rules;
+}
+
+void model_construct(ModelInstance *m) {
+    ControllerState *state = STATE(m);
+    int rules = rules_of(2, 2);
+    for (int j = 0; j < rules; j++) state->xi[j] = 1.0 / rules;
+}
+
+/* cross_parameter_errors: the rule count within the table's rule weights and, for the
+ * general controller, k Hurwitz (a positive definite P of (30)) */
+int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
+    int n = order_of(m), sets = sets_of(m);
+    if (n < 1 || n > SUPPORTED_ORDER || N_k < n || N_q < n || N_kappa < n || N_E < n) {
+        snprintf(message, size, "parameter order = %d is invalid; valid range: 1 .. %d", n, SUPPORTED_ORDER);
+        return MODEL_ERROR;
+    }
+    if (rules_of(n, sets) > N_theta) {
+        snprintf(message, size, "parameters order = %d, sets = %d give m^n = %d rules, above the bound %d; "
+                 "valid: sets^order <= %d (every sets 2..5 up to order 3, sets <= 3 at order 4)",
+                 n, sets, rules_of(n, sets), N_theta, N_theta);
+        return MODEL_ERROR;
+    }
+#ifdef VR_order
+    double k[MAX_ORDER], q[MAX_ORDER], p[MAX_ORDER][MAX_ORDER];
+    for (int i = 0; i < n; i++) {
+        k[i] = m->s->values[VRS_k[i]];
+        q[i] = m->s->values[VRS_q[i]];
+    }
+    if (lyapunov_p(n, k, q, p) != 0 || !is_positive_definite(n, (const double (*)[MAX_ORDER])p)) {
+        /* as Python prints them: k as a tuple, the polynomial s^n + k1 s^(n-1) + ... + kn */
+        char tuple[256] = "(", polynomial[512];
+        size_t used = 1;
+        int written = snprintf(polynomial, sizeof polynomial, "s^%d", n);
+        for (int i = 0; i < n; i++) {
+            char text[40];
+            py_repr(k[i], text);
+            used += (size_t)snprintf(tuple + used, sizeof tuple - used, "%s%s", i ? ", " : "", text);
+            if (n - 1 - i)
+                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %s s^%d", text,
+                                    n - 1 - i);
+            else
+                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %s", text);
+        }
+        snprintf(tuple + used, sizeof tuple - used, n == 1 ? ",)" : ")");
+        snprintf(message, size, "parameters k1..k%d = %s are invalid for order = %d: %s is not Hurwitz (no "
+                 "positive definite P in (30)); valid: k with every root of the polynomial in the left "
+                 "half-plane, e.g. the coefficients of (s + 1)^%d", n, tuple, n, polynomial, n);
+        return MODEL_ERROR;
+    }
+#endif
+    return MODEL_OK;
+}
+
+static void restart_adaptation(ModelInstance *m) {
+    int rules = rules_of(order_of(m), sets_of(m));
+    for (int j = 0; j < N_theta; j++) m->s->values[VRS_theta[j]] = j < rules ? V(m, theta0) : 0.0;
+    V(m, w_hat) = 0.0;
+}
+
+int model_initialize(ModelInstance *m, double start_time) {
+    ControllerState *state = STATE(m);
+    int n = order_of(m);
+    double k[MAX_ORDER], q[MAX_ORDER], sample[MAX_ORDER];
+    for (int i = 0; i < n; i++) {
+        k[i] = m->s->values[VRS_k[i]];
+        q[i] = m->s->values[VRS_q[i]];
+        sample[i] = m->s->values[ERROR_VR[i]];
+    }
+    if (lyapunov_p(n, k, q, state->p) != 0)
+        return fmu_fail(m, "the Lyapunov equation (30) has no solution for these k: "
+                        "s^n + k1 s^(n-1) + ... + kn must be Hurwitz");
+#if HOST_ROBUST
+    if ((int)V(m, initial_error) == INITIAL_ERROR_PINNED) {
+        double pinned[MAX_ORDER];
+        for (int i = 0; i < n; i++) pinned[i] = m->s->values[PINNED_ERROR_VR[i]];
+        latch_pin(&state->latch, n, start_time, pinned);
+    } else { /* tentative: checked over the first doSteps (Remark 3, initial_error_latch) */
+        latch_start(&state->latch, n, start_time, sample);
+    }
+    chatter_start(&state->chatter);
+#else
+    latch_pin(&state->latch, n, start_time, sample); /* latched once (Remark 3) */
+#endif
+    restart_adaptation(m);
+    return MODEL_OK;
+}
+
+int model_compute_outputs(ModelInstance *m) {
+    REPRS;
+    ControllerState *state = STATE(m);
+    const double *values = m->s->values;
+    int n = order_of(m), sets = sets_of(m);
+    double e[MAX_ORDER], ym[MAX_ORDER], error[MAX_ORDER], x[MAX_ORDER], alpha[MAX_ORDER], z[MAX_ORDER];
+    double universe[MAX_ORDER];
+    for (int i = 0; i < n; i++) {
+        e[i] = values[ERROR_VR[i]];
+        ym[i] = values[REFERENCE_VR[i]];
+        universe[i] = values[VRS_E[i]];
+    }
+    modified_error(n, e, m->s->time - state->latch.origin, state->latch.latched, V(m, lambda_e), error);
+    int fls_input = (int)V(m, fls_input);
+    fls_inputs(n, e, ym, error, fls_input, x);
+    int variant = (int)V(m, variant);
+    for (int i = 0; i < n; i++) {
+        alpha[i] = variant == VARIANT_VUD ? contraction_factor(x[i], V(m, lambda_ce), values[VRS_kappa[i]]) : 1.0;
+        z[i] = normalized_input(x[i], alpha[i], universe[i]);
+    }
+    double xi[MAX_RULES];
+    int rules = fuzzy_basis(n, sets, z, universe, V(m, mf_slope), xi);
+    double u = values[VRS_theta[0]] * xi[0]; /* [9] */
+    for (int j = 1; j < rules; j++) u += values[VRS_theta[j]] * xi[j];
+    if (variant == VARIANT_FAE) u += V(m, w_hat);
+    int finite = isfinite(u);
+    for (int i = 0; i < n; i++) finite = finite && isfinite(error[i]);
+    if (!finite) {
+        if (n == 2 && HOST_ROBUST)
+            return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s, dE = %s from e = %s, de = %s "
+                            "(latched e(0), de(0) = [%s, %s]); the inputs are out of range or the closed "
+                            "loop diverged", R(m->s->time), R(u), R(error[0]), R(error[1]), R(e[0]), R(e[1]),
+                            R(state->latch.latched[0]), R(state->latch.latched[1]));
+        if (n == 2)
+            return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s, dE = %s from e = %s, de = %s "
+                            "(latched e(0) = %s, de(0) = %s); the inputs are out of range or the closed "
+                            "loop diverged", R(m->s->time), R(u), R(error[0]), R(error[1]), R(e[0]), R(e[1]),
+                            R(state->latch.latched[0]), R(state->latch.latched[1]));
+        return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s from e = %s (latched e(0) = %s); "
+                        "the inputs are out of range or the closed loop diverged",
+                        R(m->s->time), R(u), R(error[0]), R(e[0]), R(state->latch.latched[0]));
+    }
+    V(m, u) = u;
+    for (int i = 0; i < n; i++) {
+        m->s->values[MODIFIED_ERROR_VR[i]] = error[i];
+        m->s->values[VRS_alpha[i]] = alpha[i];
+    }
+    memcpy(state->xi, xi, sizeof(double) * (size_t)rules);
+    m->outputs_stale = 0;
+    return MODEL_OK;
+}
+
+#if HOST_ROBUST
+/* let the latch rule see this doStep's inputs; restart on a re-latch, warn once */
+static int watch_initial_error(ModelInstance *m, double time) {
+    ControllerState *state = STATE(m);
+    double sample[MAX_ORDER];
+    int n = (int)state->latch.order;
+    for (int i = 0; i < n; i++) sample[i] = m->s->values[ERROR_VR[i]];
+    int events = latch_observe(&state->latch, time, sample);
+    if (events & LATCH_RELATCHED) {
+        restart_adaptation(m);
+        if (model_compute_outputs(m) != MODEL_OK) return MODEL_ERROR; /* E, dE, xi from the new latch */
+    }
+    if (events & LATCH_DECIDED) {
+        char message[2048];
+        if (latch_warning(&state->latch, ERROR_NAMES, message, sizeof message)) fmu_warn(m, "%s", message);
+    }
+    return MODEL_OK;
+}
+#endif
+
+int model_step(ModelInstance *m, double current_time, double step_size) {
+    REPRS;
+    ControllerState *state = STATE(m);
+#if HOST_ROBUST
+    if (state->latch.open != 0.0 && watch_initial_error(m, current_time) != MODEL_OK) return MODEL_ERROR;
+#endif
+    double *values = m->s->values;
+    int n = order_of(m), rules = rules_of(n, sets_of(m));
+    double error[MAX_ORDER];
+    for (int i = 0; i < n; i++) error[i] = values[MODIFIED_ERROR_VR[i]];
+    double tau = adaptation_signal(n, error, state->p);
+    double gamma = V(m, gamma), m_theta = V(m, m_theta), delta = V(m, delta);
+    double theta[MAX_RULES];
+    int finite = 1;
+    for (int j = 0; j < rules; j++) {
+        double theta_j = values[VRS_theta[j]];
+        theta[j] = theta_j + step_size * projected_rate(theta_j, tau, state->xi[j], gamma, m_theta, delta);
+        finite = finite && isfinite(theta[j]);
+    }
+    double w_hat = V(m, w_hat);
+    if ((int)V(m, variant) == VARIANT_FAE) w_hat += step_size * V(m, gamma_w) * tau;
+    if (!(finite && isfinite(w_hat))) {
+        if (n == 2)
+            return fmu_fail(m, "adaptation diverged in doStep(t=%s, h=%s): tau = %s from E = %s, dE = %s; theta "
+                            "and w_hat keep their values at t; the inputs are out of range or the closed loop "
+                            "diverged", R(current_time), R(step_size), R(tau), R(error[0]), R(error[1]));
+        return fmu_fail(m, "adaptation diverged in doStep(t=%s, h=%s): tau = %s from E = %s; theta and w_hat "
+                        "keep their values at t; the inputs are out of range or the closed loop diverged",
+                        R(current_time), R(step_size), R(tau), R(error[0]));
+    }
+    for (int j = 0; j < rules; j++) values[VRS_theta[j]] = theta[j];
+    V(m, w_hat) = w_hat;
+#if HOST_ROBUST
+    if (chatter_update(&state->chatter, V(m, u), step_size)) {
+        char message[2048];
+        chatter_warning(&state->chatter, step_size, message, sizeof message);
+        fmu_warn(m, "%s", message);
+    }
+#else
+    (void)ERROR_NAMES;
+#endif
+    return MODEL_OK;
+}

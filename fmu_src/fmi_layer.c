@@ -1,0 +1,1081 @@
+/* The FMI layer of the native FMUs: FMI 2.0 (FMI_VERSION 2) or FMI 3.0 (FMI_VERSION 3)
+ * co-simulation, written once for the four models (see fmi_layer.h).
+ *
+ * Life cycle (a state machine in the manner of the Modelica Reference-FMUs):
+ *
+ *   instantiated --enterInitializationMode--> initialization --exitInitializationMode-->
+ *   step --terminate--> terminated;  reset from any state -> instantiated.
+ *
+ * Each call checks it is allowed in the current state and otherwise returns Error with
+ * a message naming the call and the state.  Model errors (invalid parameters, NaN
+ * inputs, divergence) are returned as Error, never Fatal, and leave the instance usable:
+ * the host may correct a parameter and exit initialisation again, or free the instance.
+ * Every function of the API is exported; those this FMU does not support (model
+ * exchange, derivatives, events, clocks, types it has no variables of) return Error
+ * with a log message.
+ */
+#include <float.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi_layer.h"
+
+#if FMI_VERSION == 2
+#include "fmi2Functions.h"
+typedef fmi2Status Status;
+#define STATUS_OK fmi2OK
+#define STATUS_WARNING fmi2Warning
+#define STATUS_DISCARD fmi2Discard
+#define STATUS_ERROR fmi2Error
+#define STATUS_FATAL fmi2Fatal
+#define TERMINATE_CALL "fmi2Terminate"
+#define EXIT_INIT_CALL "fmi2ExitInitializationMode"
+#define SET_STATE_CALL "fmi2SetFMUstate"
+#elif FMI_VERSION == 3
+#include "fmi3Functions.h"
+typedef fmi3Status Status;
+#define STATUS_OK fmi3OK
+#define STATUS_WARNING fmi3Warning
+#define STATUS_DISCARD fmi3Discard
+#define STATUS_ERROR fmi3Error
+#define STATUS_FATAL fmi3Fatal
+#define TERMINATE_CALL "fmi3Terminate"
+#define EXIT_INIT_CALL "fmi3ExitInitializationMode"
+#define SET_STATE_CALL "fmi3SetFMUState"
+#else
+#error "compile with -DFMI_VERSION=2 or -DFMI_VERSION=3"
+#endif
+
+enum {
+    MODE_INSTANTIATED = 1,
+    MODE_INITIALIZATION = 2,
+    MODE_STEP = 4,
+    MODE_TERMINATED = 8,
+};
+#define ANY_MODE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED)
+
+static const char *mode_name(int mode) {
+    switch (mode) {
+    case MODE_INSTANTIATED: return "Instantiated";
+    case MODE_INITIALIZATION: return "Initialization Mode";
+    case MODE_STEP: return "Step Mode";
+    case MODE_TERMINATED: return "Terminated";
+    default: return "unknown";
+    }
+}
+
+/* the host's callbacks */
+typedef struct {
+#if FMI_VERSION == 2
+    fmi2CallbackLogger logger;
+    fmi2ComponentEnvironment environment;
+#else
+    fmi3LogMessageCallback logger;
+    fmi3InstanceEnvironment environment;
+#endif
+} Host;
+
+static size_t snapshot_bytes(void) { return sizeof(Snapshot) + MODEL_INTERNAL_BYTES; }
+
+/* ------------------------------------------------------------------ logging */
+
+static void log_message(ModelInstance *m, Status status, const char *category, const char *message) {
+    Host *host = (Host *)m->host;
+    if (!host->logger) return;
+#if FMI_VERSION == 2
+    host->logger(host->environment, m->instance_name, status, category, message);
+#else
+    host->logger(host->environment, status, category, message);
+#endif
+}
+
+static void log_formatted(ModelInstance *m, Status status, const char *category, const char *format, va_list args) {
+    char message[2048];
+    int prefix = snprintf(message, sizeof message, "%s: ", m->instance_name);
+    if (prefix < 0) prefix = 0;
+    vsnprintf(message + prefix, sizeof message - (size_t)prefix, format, args);
+    log_message(m, status, category, message);
+}
+
+int fmu_fail(ModelInstance *m, const char *format, ...) {
+    va_list args;
+    va_start(args, format);
+    log_formatted(m, STATUS_ERROR, "logStatusError", format, args);
+    va_end(args);
+    return MODEL_ERROR;
+}
+
+void fmu_warn(ModelInstance *m, const char *format, ...) {
+    va_list args;
+    va_start(args, format);
+    log_formatted(m, STATUS_WARNING, "logStatusWarning", format, args);
+    va_end(args);
+}
+
+/* Python's repr(float): the shortest digits that read back to x, in Python's layout
+ * (exponent form when the decimal exponent is < -4 or >= 16; "1.0", "inf", "nan"). */
+const char *py_repr(double x, char *buffer) {
+    if (isnan(x)) { strcpy(buffer, "nan"); return buffer; }
+    if (isinf(x)) { strcpy(buffer, x > 0 ? "inf" : "-inf"); return buffer; }
+    if (x == 0.0) { strcpy(buffer, signbit(x) ? "-0.0" : "0.0"); return buffer; }
+    char scientific[40];
+    int precision;
+    for (precision = 0; precision < 17; precision++) {
+        snprintf(scientific, sizeof scientific, "%.*e", precision, x);
+        if (strtod(scientific, NULL) == x) break;
+    }
+    /* scientific = [-]d[.ddd]e[+-]XX */
+    char digits[24];
+    size_t n = 0;
+    const char *c = scientific;
+    int negative = 0;
+    if (*c == '-') { negative = 1; c++; }
+    for (; *c && *c != 'e'; c++)
+        if (*c >= '0' && *c <= '9') digits[n++] = *c;
+    digits[n] = 0;
+    int exponent = atoi(c + 1);
+    while (n > 1 && digits[n - 1] == '0') digits[--n] = 0;
+    char *out = buffer;
+    if (negative) *out++ = '-';
+    if (exponent < -4 || exponent >= 16) {
+        *out++ = digits[0];
+        if (n > 1) { *out++ = '.'; memcpy(out, digits + 1, n - 1); out += n - 1; }
+        sprintf(out, "e%c%02d", exponent < 0 ? '-' : '+', exponent < 0 ? -exponent : exponent);
+    } else if (exponent < 0) {
+        *out++ = '0'; *out++ = '.';
+        for (int i = 0; i < -exponent - 1; i++) *out++ = '0';
+        memcpy(out, digits, n); out += n; *out = 0;
+    } else {
+        for (int i = 0; i <= exponent; i++) *out++ = (size_t)i < n ? digits[i] : '0';
+        *out++ = '.';
+        if ((size_t)exponent + 1 < n) { memcpy(out, digits + exponent + 1, n - exponent - 1); out += n - exponent - 1; }
+        else *out++ = '0';
+        *out = 0;
+    }
+    return buffer;
+}
+
+const char *repr_in(Reprs *reprs, double x) {
+    char *buffer = reprs->text[reprs->used];
+    reprs->used = (reprs->used + 1) % (int)(sizeof reprs->text / sizeof reprs->text[0]);
+    return py_repr(x, buffer);
+}
+
+/* a variable's value as the Python edition prints it: int for Integer variables */
+static const char *value_repr(int vr, double value, char *buffer) {
+    if (MODEL_VARIABLES[vr].is_integer && isfinite(value) && value == floor(value)) {
+        snprintf(buffer, 40, "%.0f", value);
+        return buffer;
+    }
+    return py_repr(value, buffer);
+}
+
+/* --------------------------------------------------------------- validation */
+
+/* Variable.check: NULL-equivalent (0) if valid, else writes the message */
+static int check_variable(int vr, double value, char *message, size_t size) {
+    const VariableInfo *v = &MODEL_VARIABLES[vr];
+    int bad = !isfinite(value);
+    if (!bad && v->is_integer && value != floor(value)) bad = 1;
+    if (!bad && v->has_minimum) bad = v->exclusive_minimum ? value <= v->minimum : value < v->minimum;
+    if (!bad && v->has_maximum) bad = v->exclusive_maximum ? value >= v->maximum : value > v->maximum;
+    char text[40];
+    if (bad)
+        snprintf(message, size, "parameter %s = %s is invalid; valid range: %s", v->name,
+                 value_repr(vr, value, text), v->valid_range);
+    return bad;
+}
+
+/* TableSlave._parameter_errors: the messages joined by "; " (0 if none) */
+static int parameter_errors(ModelInstance *m, char *message, size_t size) {
+    size_t used = 0;
+    int count = 0;
+    message[0] = 0;
+    for (int vr = 0; vr < N_VARIABLES; vr++) {
+        char one[512];
+        if (MODEL_VARIABLES[vr].causality != CAUSALITY_PARAMETER) continue;
+        if (!check_variable(vr, m->s->values[vr], one, sizeof one)) continue;
+        int written = snprintf(message + used, size - used, "%s%s", count ? "; " : "", one);
+        if (written > 0 && (size_t)written < size - used) used += (size_t)written;
+        count++;
+    }
+    if (count) return 1;
+    return model_cross_parameter_errors(m, message, size) != MODEL_OK;
+}
+
+/* -------------------------------------------------------------- life cycle */
+
+static void reset_snapshot(ModelInstance *m) {
+    memset(m->s, 0, snapshot_bytes());
+    for (int vr = 0; vr < N_VARIABLES; vr++) m->s->values[vr] = MODEL_VARIABLES[vr].start;
+    m->s->time = 0.0;
+    m->s->start_time = 0.0;
+    m->s->initialized = 0.0;
+    m->outputs_stale = 1;
+    m->stale_on_set = 1;
+    m->mode = MODE_INSTANTIATED;
+    model_construct(m);
+}
+
+static ModelInstance *create_instance(const char *name, Host host, int logging_on) {
+    ModelInstance *m = (ModelInstance *)calloc(1, sizeof(ModelInstance));
+    if (!m) return NULL;
+    m->s = (Snapshot *)calloc(1, snapshot_bytes());
+    m->host = malloc(sizeof(Host));
+    m->instance_name = (char *)malloc(strlen(name ? name : "") + 1);
+    if (!m->s || !m->host || !m->instance_name) {
+        free(m->s); free(m->host); free(m->instance_name); free(m);
+        return NULL;
+    }
+    strcpy(m->instance_name, name ? name : "");
+    *(Host *)m->host = host;
+    m->internal = (char *)m->s + sizeof(Snapshot);
+    m->logging_on = logging_on;
+    m->feedthrough = MODEL_FEEDTHROUGH;
+    reset_snapshot(m);
+    return m;
+}
+
+static void free_instance(ModelInstance *m) {
+    if (!m) return;
+    free(m->s);
+    free(m->host);
+    free(m->instance_name);
+    free(m);
+}
+
+/* the call is allowed in the current state, else log and return 0 */
+static int allowed(ModelInstance *m, const char *call, int modes) {
+    if (!m) return 0;
+    if (m->mode & modes) return 1;
+    fmu_fail(m, "%s is not allowed in state %s", call, mode_name(m->mode));
+    return 0;
+}
+
+#define CHECK(call, modes) \
+    do { if (!allowed(m, call, modes)) return STATUS_ERROR; } while (0)
+
+static Status unsupported(ModelInstance *m, const char *call) {
+    if (m) fmu_fail(m, "%s is not supported by this FMU", call);
+    return STATUS_ERROR;
+}
+
+static void begin_experiment(ModelInstance *m, double start_time) {
+    m->s->start_time = start_time;
+    m->s->time = start_time;
+}
+
+static Status exit_initialization(ModelInstance *m) {
+    char message[4096];
+    if (parameter_errors(m, message, sizeof message)) {
+        fmu_fail(m, "%s", message);
+        return STATUS_ERROR;
+    }
+    m->s->time = m->s->start_time;
+    if (model_initialize(m, m->s->start_time) != MODEL_OK) return STATUS_ERROR;
+    m->s->initialized = 1.0;
+    m->stale_on_set = m->feedthrough;
+    m->outputs_stale = 1;
+    m->mode = MODE_STEP;
+    return STATUS_OK;
+}
+
+/* TableSlave._initial_outputs / get_real's refresh */
+static int refresh_outputs(ModelInstance *m) {
+    if (!m->outputs_stale) return MODEL_OK;
+    if (m->s->initialized != 0.0) return model_compute_outputs(m);
+    char message[4096];
+    if (parameter_errors(m, message, sizeof message)) return MODEL_OK; /* keep start values */
+    if (model_initialize(m, m->s->start_time) != MODEL_OK) return MODEL_ERROR;
+    return model_compute_outputs(m);
+}
+
+/* doStep only between exitInitializationMode and terminate, with the communication point at the
+ * FMU's own time (where the last step ended, or the time of a restored state; 1e-9 relative) and
+ * a step >= 0; a refused doStep changes nothing and returns Discard (the wording and rules of
+ * afc_slave_base.TableSlave._refuse_step) */
+static Status do_step(ModelInstance *m, double current_time, double step_size, const char *call) {
+    REPRS;
+    double time = m->s->time;
+    if (!(m->mode == MODE_STEP && step_size >= 0.0 &&
+          fabs(current_time - time) <= 1e-9 * (fabs(time) + step_size))) {
+        const char *rule;
+        char expected[256];
+        if (m->mode == MODE_TERMINATED)
+            rule = "the FMU was terminated (" TERMINATE_CALL "); doStep is allowed only between "
+                   EXIT_INIT_CALL " and " TERMINATE_CALL;
+        else if (m->mode != MODE_STEP)
+            rule = "the FMU is not initialised: call " EXIT_INIT_CALL " first; doStep is allowed only "
+                   "between " EXIT_INIT_CALL " and " TERMINATE_CALL;
+        else if (!(step_size >= 0.0))
+            rule = "the communication step must be >= 0";
+        else {
+            snprintf(expected, sizeof expected, "expected currentCommunicationPoint = %s, the FMU's time (where "
+                     "the last step ended, or the time of the state restored by " SET_STATE_CALL "); a step "
+                     "must start there", R(time));
+            rule = expected;
+        }
+        fmu_fail(m, "%s(currentCommunicationPoint = %s, communicationStepSize = %s) refused: %s; state and time "
+                 "unchanged", call, R(current_time), R(step_size), rule);
+        return STATUS_DISCARD;
+    }
+    if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return STATUS_ERROR;
+    if (model_step(m, current_time, step_size) != MODEL_OK) return STATUS_ERROR;
+    m->s->time = current_time + step_size;
+    m->outputs_stale = 1;
+    return STATUS_OK;
+}
+
+/* ----------------------------------------------------------- value access */
+
+/* FMI 3.0: the independent variable time has the value reference after the table's */
+#define VR_TIME ((unsigned)N_VARIABLES)
+
+static int valid_reference(ModelInstance *m, unsigned vr, int integer, const char *call) {
+    if (FMI_VERSION == 3 && vr == VR_TIME && !integer) return 1;
+    if (vr >= (unsigned)N_VARIABLES) {
+        fmu_fail(m, "%s: unknown value reference %u (this FMU has 0 .. %d)", call, vr, N_VARIABLES - 1);
+        return 0;
+    }
+    if (MODEL_VARIABLES[vr].is_integer != integer) {
+        fmu_fail(m, "%s: variable %s (value reference %u) is of type %s", call, MODEL_VARIABLES[vr].name,
+                 vr, MODEL_VARIABLES[vr].is_integer ? "Integer" : "Real");
+        return 0;
+    }
+    return 1;
+}
+
+static Status get_values(ModelInstance *m, const unsigned *vr, size_t n, double *real, int *integer,
+                         const char *call) {
+    CHECK(call, MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED);
+    if (n == 0) return STATUS_OK;
+    if (refresh_outputs(m) != MODEL_OK) return STATUS_ERROR;
+    const double *values = m->s->values;
+    for (size_t i = 0; i < n; i++) {
+        if (!valid_reference(m, vr[i], integer != NULL, call)) return STATUS_ERROR;
+        if (integer) integer[i] = (int)values[vr[i]];
+        else real[i] = vr[i] == VR_TIME ? m->s->time : values[vr[i]];
+    }
+    return STATUS_OK;
+}
+
+/* TableSlave._reject plus the fixed-parameter rule */
+/* TableSlave._reject: outputs are never set; after terminate nothing; parameters (variability
+ * fixed) only before exitInitializationMode; NaN and inf never */
+static int settable(ModelInstance *m, unsigned vr, double value, const char *call) {
+    REPRS;
+    const VariableInfo *v = &MODEL_VARIABLES[vr];
+    char text[40], kept[40];
+    if (v->causality == CAUSALITY_OUTPUT) {
+        fmu_fail(m, "%s is an output and cannot be set", v->name);
+        return 0;
+    }
+    if (m->mode == MODE_TERMINATED) {
+        fmu_fail(m, "%s: %s = %s refused: the FMU was terminated (" TERMINATE_CALL "); no variable can be set "
+                 "after " TERMINATE_CALL, call, v->name, value_repr((int)vr, value, text));
+        return 0;
+    }
+    if (v->causality == CAUSALITY_PARAMETER) {
+        if (m->mode == MODE_STEP) {
+            fmu_fail(m, "%s: %s = %s refused at t = %s: %s is a parameter of variability fixed, which can be set "
+                     "only before " EXIT_INIT_CALL " (it keeps %s); in step mode only inputs can be set", call,
+                     v->name, value_repr((int)vr, value, text), R(m->s->time), v->name,
+                     value_repr((int)vr, m->s->values[vr], kept));
+            return 0;
+        }
+        if (!isfinite(value)) {
+            char message[512];
+            check_variable((int)vr, value, message, sizeof message);
+            fmu_fail(m, "%s", message);
+            return 0;
+        }
+        return 1;
+    }
+    if (!isfinite(value)) {
+        fmu_fail(m, "input %s = %s is not finite", v->name, R(value));
+        return 0;
+    }
+    return 1;
+}
+
+static Status set_values(ModelInstance *m, const unsigned *vr, size_t n, const double *real, const int *integer,
+                         const char *call) {
+    CHECK(call, ANY_MODE); /* the rules per variable and state: settable() */
+    Status status = STATUS_OK;
+    for (size_t i = 0; i < n; i++) {
+        if (!valid_reference(m, vr[i], integer != NULL, call)) { status = STATUS_ERROR; break; }
+        if (vr[i] == VR_TIME) {
+            fmu_fail(m, "%s: time is the independent variable and cannot be set", call);
+            status = STATUS_ERROR;
+            break;
+        }
+        double value = integer ? (double)integer[i] : real[i];
+        if (!settable(m, vr[i], value, call)) { status = STATUS_ERROR; break; }
+        m->s->values[vr[i]] = value;
+    }
+    if (m->stale_on_set || integer) m->outputs_stale = 1;
+    return status;
+}
+
+static Status no_variables_of_type(ModelInstance *m, size_t n, const char *call) {
+    if (!m) return STATUS_ERROR;
+    if (n == 0) return STATUS_OK;
+    fmu_fail(m, "%s: this FMU has no variables of that type", call);
+    return STATUS_ERROR;
+}
+
+/* --------------------------------------------------------------- FMU state */
+
+#define STATE_MAGIC 0x53434641u /* "AFCS" */
+typedef struct {
+    uint32_t magic;
+    uint32_t variables;
+    uint64_t bytes;
+} SerializedHeader;
+
+static Status get_state(ModelInstance *m, void **state) {
+    if (!m) return STATUS_ERROR;
+    if (!*state) {
+        *state = malloc(snapshot_bytes());
+        if (!*state) { fmu_fail(m, "getFMUState: out of memory"); return STATUS_ERROR; }
+    }
+    memcpy(*state, m->s, snapshot_bytes());
+    return STATUS_OK;
+}
+
+static Status set_state(ModelInstance *m, const void *state) {
+    if (!m) return STATUS_ERROR;
+    if (!state) { fmu_fail(m, "setFMUState: the state is NULL"); return STATUS_ERROR; }
+    memcpy(m->s, state, snapshot_bytes());
+    m->stale_on_set = m->feedthrough || m->s->initialized == 0.0;
+    m->outputs_stale = 1;
+    /* the restored state decides the mode: an initialised state steps from its time, also in
+     * a fresh instance (the FMU is as it was when the state was taken); terminate stays final */
+    if (m->mode != MODE_TERMINATED)
+        m->mode = m->s->initialized != 0.0 ? MODE_STEP : (m->mode == MODE_STEP ? MODE_INITIALIZATION : m->mode);
+    return STATUS_OK;
+}
+
+static Status free_state(ModelInstance *m, void **state) {
+    if (!m) return STATUS_ERROR;
+    if (state && *state) { free(*state); *state = NULL; }
+    return STATUS_OK;
+}
+
+static size_t serialized_size(void) { return sizeof(SerializedHeader) + snapshot_bytes(); }
+
+static Status serialize_state(ModelInstance *m, const void *state, unsigned char *out, size_t size) {
+    if (!m) return STATUS_ERROR;
+    if (!state) { fmu_fail(m, "serializeFMUState: the state is NULL"); return STATUS_ERROR; }
+    if (size < serialized_size()) {
+        fmu_fail(m, "serializeFMUState: buffer of %zu bytes, %zu needed", size, serialized_size());
+        return STATUS_ERROR;
+    }
+    SerializedHeader header = {STATE_MAGIC, (uint32_t)N_VARIABLES, (uint64_t)snapshot_bytes()};
+    memcpy(out, &header, sizeof header);
+    memcpy(out + sizeof header, state, snapshot_bytes());
+    return STATUS_OK;
+}
+
+static Status deserialize_state(ModelInstance *m, const unsigned char *in, size_t size, void **state) {
+    if (!m) return STATUS_ERROR;
+    SerializedHeader header;
+    if (size != serialized_size()) {
+        fmu_fail(m, "deSerializeFMUState: %zu bytes, a state of this FMU has %zu", size, serialized_size());
+        return STATUS_ERROR;
+    }
+    memcpy(&header, in, sizeof header);
+    if (header.magic != STATE_MAGIC || header.variables != (uint32_t)N_VARIABLES ||
+        header.bytes != (uint64_t)snapshot_bytes()) {
+        fmu_fail(m, "deSerializeFMUState: the bytes are not a state of this FMU");
+        return STATUS_ERROR;
+    }
+    if (!*state) {
+        *state = malloc(snapshot_bytes());
+        if (!*state) { fmu_fail(m, "deSerializeFMUState: out of memory"); return STATUS_ERROR; }
+    }
+    memcpy(*state, in + sizeof header, snapshot_bytes());
+    return STATUS_OK;
+}
+
+#if FMI_VERSION == 2
+/* =================================================================== FMI 2.0 */
+#define M ((ModelInstance *)c)
+#define UNSUPPORTED2(call) return unsupported(M, call)
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[]) {
+    (void)nCategories; (void)categories;
+    if (!c) return fmi2Error;
+    M->logging_on = loggingOn;
+    return fmi2OK;
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn) {
+    (void)fmuResourceLocation; (void)visible;
+    Host host = {functions ? functions->logger : NULL, functions ? functions->componentEnvironment : NULL};
+    const char *name = instanceName ? instanceName : "";
+    if (fmuType != fmi2CoSimulation) {
+        if (host.logger) host.logger(host.environment, name, fmi2Error, "logStatusError",
+                                     "this FMU supports co-simulation only");
+        return NULL;
+    }
+    if (!fmuGUID || strcmp(fmuGUID, MODEL_GUID) != 0) {
+        if (host.logger) host.logger(host.environment, name, fmi2Error, "logStatusError",
+                                     "wrong GUID: this binary belongs to GUID " MODEL_GUID);
+        return NULL;
+    }
+    return create_instance(name, host, loggingOn);
+}
+
+void fmi2FreeInstance(fmi2Component c) { free_instance(M); }
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
+    (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
+    ModelInstance *m = M;
+    CHECK("fmi2SetupExperiment", MODE_INSTANTIATED);
+    begin_experiment(m, startTime);
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
+    ModelInstance *m = M;
+    CHECK("fmi2EnterInitializationMode", MODE_INSTANTIATED);
+    m->mode = MODE_INITIALIZATION;
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    ModelInstance *m = M;
+    CHECK("fmi2ExitInitializationMode", MODE_INITIALIZATION);
+    return exit_initialization(m);
+}
+
+fmi2Status fmi2Terminate(fmi2Component c) {
+    ModelInstance *m = M;
+    CHECK("fmi2Terminate", MODE_STEP);
+    m->mode = MODE_TERMINATED;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component c) {
+    ModelInstance *m = M;
+    CHECK("fmi2Reset", ANY_MODE);
+    reset_snapshot(m);
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
+    return get_values(M, vr, nvr, value, NULL, "fmi2GetReal");
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
+    return get_values(M, vr, nvr, NULL, value, "fmi2GetInteger");
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
+    (void)vr; (void)value;
+    return no_variables_of_type(M, nvr, "fmi2GetBoolean");
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
+    (void)vr; (void)value;
+    return no_variables_of_type(M, nvr, "fmi2GetString");
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
+    return set_values(M, vr, nvr, value, NULL, "fmi2SetReal");
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
+    return set_values(M, vr, nvr, NULL, value, "fmi2SetInteger");
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
+    (void)vr; (void)value;
+    return no_variables_of_type(M, nvr, "fmi2SetBoolean");
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
+    (void)vr; (void)value;
+    return no_variables_of_type(M, nvr, "fmi2SetString");
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) { return get_state(M, FMUstate); }
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) { return set_state(M, FMUstate); }
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) { return free_state(M, FMUstate); }
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
+    (void)FMUstate;
+    if (!c) return fmi2Error;
+    *size = serialized_size();
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
+    return serialize_state(M, FMUstate, (unsigned char *)serializedState, size);
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
+                                   fmi2FMUstate *FMUstate) {
+    return deserialize_state(M, (const unsigned char *)serializedState, size, FMUstate);
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
+    (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
+    UNSUPPORTED2("fmi2GetDirectionalDerivative");
+}
+
+/* model exchange: not supported */
+fmi2Status fmi2EnterEventMode(fmi2Component c) { UNSUPPORTED2("fmi2EnterEventMode"); }
+fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo) {
+    (void)eventInfo;
+    UNSUPPORTED2("fmi2NewDiscreteStates");
+}
+fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) { UNSUPPORTED2("fmi2EnterContinuousTimeMode"); }
+fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
+    (void)noSetFMUStatePriorToCurrentPoint; (void)enterEventMode; (void)terminateSimulation;
+    UNSUPPORTED2("fmi2CompletedIntegratorStep");
+}
+fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) { (void)time; UNSUPPORTED2("fmi2SetTime"); }
+fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx) {
+    (void)x; (void)nx;
+    UNSUPPORTED2("fmi2SetContinuousStates");
+}
+fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx) {
+    (void)derivatives; (void)nx;
+    UNSUPPORTED2("fmi2GetDerivatives");
+}
+fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
+    (void)eventIndicators; (void)ni;
+    UNSUPPORTED2("fmi2GetEventIndicators");
+}
+fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
+    (void)x; (void)nx;
+    UNSUPPORTED2("fmi2GetContinuousStates");
+}
+fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx) {
+    (void)x_nominal; (void)nx;
+    UNSUPPORTED2("fmi2GetNominalsOfContinuousStates");
+}
+
+/* co-simulation */
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[]) {
+    (void)vr; (void)nvr; (void)order; (void)value;
+    UNSUPPORTED2("fmi2SetRealInputDerivatives");
+}
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[]) {
+    (void)vr; (void)nvr; (void)order; (void)value;
+    UNSUPPORTED2("fmi2GetRealOutputDerivatives");
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!c) return fmi2Error;
+    return do_step(M, currentCommunicationPoint, communicationStepSize, "fmi2DoStep");
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c) { UNSUPPORTED2("fmi2CancelStep (doStep never returns fmi2Pending)"); }
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
+    (void)s; (void)value;
+    UNSUPPORTED2("fmi2GetStatus (doStep is synchronous)");
+}
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
+    (void)s; (void)value;
+    UNSUPPORTED2("fmi2GetRealStatus (doStep is synchronous)");
+}
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
+    (void)s; (void)value;
+    UNSUPPORTED2("fmi2GetIntegerStatus (doStep is synchronous)");
+}
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
+    (void)s; (void)value;
+    UNSUPPORTED2("fmi2GetBooleanStatus (doStep is synchronous)");
+}
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
+    (void)s; (void)value;
+    UNSUPPORTED2("fmi2GetStringStatus (doStep is synchronous)");
+}
+
+#else
+/* =================================================================== FMI 3.0 */
+#define M ((ModelInstance *)instance)
+#define UNSUPPORTED3(call) return unsupported(M, call)
+
+const char *fmi3GetVersion(void) { return fmi3Version; }
+
+fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
+                               const fmi3String categories[]) {
+    (void)nCategories; (void)categories;
+    if (!instance) return fmi3Error;
+    M->logging_on = loggingOn;
+    return fmi3OK;
+}
+
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage) {
+    (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
+    if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                               "this FMU supports co-simulation only");
+    return NULL;
+}
+
+fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
+                                         fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                         fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
+                                         const fmi3ValueReference requiredIntermediateVariables[],
+                                         size_t nRequiredIntermediateVariables,
+                                         fmi3InstanceEnvironment instanceEnvironment,
+                                         fmi3LogMessageCallback logMessage,
+                                         fmi3IntermediateUpdateCallback intermediateUpdate) {
+    (void)resourcePath; (void)visible; (void)earlyReturnAllowed; (void)requiredIntermediateVariables;
+    (void)nRequiredIntermediateVariables; (void)intermediateUpdate;
+    Host host = {logMessage, instanceEnvironment};
+    if (eventModeUsed) {
+        if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                                   "this FMU has no event mode (eventModeUsed must be false)");
+        return NULL;
+    }
+    if (!instantiationToken || strcmp(instantiationToken, MODEL_GUID) != 0) {
+        if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                                   "wrong instantiationToken: this binary belongs to " MODEL_GUID);
+        return NULL;
+    }
+    return create_instance(instanceName, host, loggingOn);
+}
+
+fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
+                                               fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                               fmi3InstanceEnvironment instanceEnvironment,
+                                               fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
+                                               fmi3LockPreemptionCallback lockPreemption,
+                                               fmi3UnlockPreemptionCallback unlockPreemption) {
+    (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
+    (void)clockUpdate; (void)lockPreemption; (void)unlockPreemption;
+    if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                               "this FMU supports co-simulation only");
+    return NULL;
+}
+
+void fmi3FreeInstance(fmi3Instance instance) { free_instance(M); }
+
+fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
+                                       fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
+    (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
+    ModelInstance *m = M;
+    CHECK("fmi3EnterInitializationMode", MODE_INSTANTIATED);
+    begin_experiment(m, startTime);
+    m->mode = MODE_INITIALIZATION;
+    return fmi3OK;
+}
+
+fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
+    ModelInstance *m = M;
+    CHECK("fmi3ExitInitializationMode", MODE_INITIALIZATION);
+    return exit_initialization(m);
+}
+
+fmi3Status fmi3EnterEventMode(fmi3Instance instance) { UNSUPPORTED3("fmi3EnterEventMode"); }
+
+fmi3Status fmi3Terminate(fmi3Instance instance) {
+    ModelInstance *m = M;
+    CHECK("fmi3Terminate", MODE_STEP);
+    m->mode = MODE_TERMINATED;
+    return fmi3OK;
+}
+
+fmi3Status fmi3Reset(fmi3Instance instance) {
+    ModelInstance *m = M;
+    CHECK("fmi3Reset", ANY_MODE);
+    reset_snapshot(m);
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          fmi3Float64 values[], size_t nValues) {
+    if (instance && nValues != nValueReferences) {
+        fmu_fail(M, "fmi3GetFloat64: %zu values for %zu value references", nValues, nValueReferences);
+        return fmi3Error;
+    }
+    return get_values(M, valueReferences, nValueReferences, values, NULL, "fmi3GetFloat64");
+}
+
+fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        fmi3Int32 values[], size_t nValues) {
+    if (instance && nValues != nValueReferences) {
+        fmu_fail(M, "fmi3GetInt32: %zu values for %zu value references", nValues, nValueReferences);
+        return fmi3Error;
+    }
+    return get_values(M, valueReferences, nValueReferences, NULL, (int *)values, "fmi3GetInt32");
+}
+
+fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          const fmi3Float64 values[], size_t nValues) {
+    if (instance && nValues != nValueReferences) {
+        fmu_fail(M, "fmi3SetFloat64: %zu values for %zu value references", nValues, nValueReferences);
+        return fmi3Error;
+    }
+    return set_values(M, valueReferences, nValueReferences, values, NULL, "fmi3SetFloat64");
+}
+
+fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        const fmi3Int32 values[], size_t nValues) {
+    if (instance && nValues != nValueReferences) {
+        fmu_fail(M, "fmi3SetInt32: %zu values for %zu value references", nValues, nValueReferences);
+        return fmi3Error;
+    }
+    return set_values(M, valueReferences, nValueReferences, NULL, (const int *)values, "fmi3SetInt32");
+}
+
+/* types this FMU has no variables of */
+#define NO_GETTER(name, type)                                                                                  \
+    fmi3Status name(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences, \
+                    type values[], size_t nValues) {                                                           \
+        (void)valueReferences; (void)values; (void)nValues;                                                    \
+        return no_variables_of_type(M, nValueReferences, #name);                                               \
+    }
+#define NO_SETTER(name, type)                                                                                  \
+    fmi3Status name(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences, \
+                    const type values[], size_t nValues) {                                                     \
+        (void)valueReferences; (void)values; (void)nValues;                                                    \
+        return no_variables_of_type(M, nValueReferences, #name);                                               \
+    }
+NO_GETTER(fmi3GetFloat32, fmi3Float32)
+NO_GETTER(fmi3GetInt8, fmi3Int8)
+NO_GETTER(fmi3GetUInt8, fmi3UInt8)
+NO_GETTER(fmi3GetInt16, fmi3Int16)
+NO_GETTER(fmi3GetUInt16, fmi3UInt16)
+NO_GETTER(fmi3GetUInt32, fmi3UInt32)
+NO_GETTER(fmi3GetInt64, fmi3Int64)
+NO_GETTER(fmi3GetUInt64, fmi3UInt64)
+NO_GETTER(fmi3GetBoolean, fmi3Boolean)
+NO_GETTER(fmi3GetString, fmi3String)
+NO_SETTER(fmi3SetFloat32, fmi3Float32)
+NO_SETTER(fmi3SetInt8, fmi3Int8)
+NO_SETTER(fmi3SetUInt8, fmi3UInt8)
+NO_SETTER(fmi3SetInt16, fmi3Int16)
+NO_SETTER(fmi3SetUInt16, fmi3UInt16)
+NO_SETTER(fmi3SetUInt32, fmi3UInt32)
+NO_SETTER(fmi3SetInt64, fmi3Int64)
+NO_SETTER(fmi3SetUInt64, fmi3UInt64)
+NO_SETTER(fmi3SetBoolean, fmi3Boolean)
+NO_SETTER(fmi3SetString, fmi3String)
+
+fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         size_t valueSizes[], fmi3Binary values[], size_t nValues) {
+    (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
+    return no_variables_of_type(M, nValueReferences, "fmi3GetBinary");
+}
+fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         const size_t valueSizes[], const fmi3Binary values[], size_t nValues) {
+    (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
+    return no_variables_of_type(M, nValueReferences, "fmi3SetBinary");
+}
+fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        fmi3Clock values[]) {
+    (void)valueReferences; (void)values;
+    return no_variables_of_type(M, nValueReferences, "fmi3GetClock");
+}
+fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        const fmi3Clock values[]) {
+    (void)valueReferences; (void)values;
+    return no_variables_of_type(M, nValueReferences, "fmi3SetClock");
+}
+
+fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueReference valueReference,
+                                               size_t *nDependencies) {
+    (void)valueReference; (void)nDependencies;
+    UNSUPPORTED3("fmi3GetNumberOfVariableDependencies (the dependencies are in modelDescription.xml)");
+}
+fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference dependent,
+                                       size_t elementIndicesOfDependent[], fmi3ValueReference independents[],
+                                       size_t elementIndicesOfIndependents[], fmi3DependencyKind dependencyKinds[],
+                                       size_t nDependencies) {
+    (void)dependent; (void)elementIndicesOfDependent; (void)independents; (void)elementIndicesOfIndependents;
+    (void)dependencyKinds; (void)nDependencies;
+    UNSUPPORTED3("fmi3GetVariableDependencies (the dependencies are in modelDescription.xml)");
+}
+
+fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) { return get_state(M, FMUState); }
+fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) { return set_state(M, FMUState); }
+fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) { return free_state(M, FMUState); }
+
+fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size) {
+    (void)FMUState;
+    if (!instance) return fmi3Error;
+    *size = serialized_size();
+    return fmi3OK;
+}
+fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[],
+                                 size_t size) {
+    return serialize_state(M, FMUState, serializedState, size);
+}
+fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
+                                   fmi3FMUState *FMUState) {
+    return deserialize_state(M, serializedState, size, FMUState);
+}
+
+fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
+                                        const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
+                                        size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {
+    (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed; (void)sensitivity;
+    (void)nSensitivity;
+    UNSUPPORTED3("fmi3GetDirectionalDerivative");
+}
+fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
+                                    const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
+                                    size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {
+    (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed; (void)sensitivity;
+    (void)nSensitivity;
+    UNSUPPORTED3("fmi3GetAdjointDerivative");
+}
+
+fmi3Status fmi3EnterConfigurationMode(fmi3Instance instance) {
+    UNSUPPORTED3("fmi3EnterConfigurationMode (no structural parameters)");
+}
+fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) {
+    UNSUPPORTED3("fmi3ExitConfigurationMode (no structural parameters)");
+}
+
+/* clocks: none */
+fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                  size_t nValueReferences, fmi3Float64 intervals[],
+                                  fmi3IntervalQualifier qualifiers[]) {
+    (void)valueReferences; (void)intervals; (void)qualifiers;
+    return no_variables_of_type(M, nValueReferences, "fmi3GetIntervalDecimal");
+}
+fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                   size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[],
+                                   fmi3IntervalQualifier qualifiers[]) {
+    (void)valueReferences; (void)counters; (void)resolutions; (void)qualifiers;
+    return no_variables_of_type(M, nValueReferences, "fmi3GetIntervalFraction");
+}
+fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                               size_t nValueReferences, fmi3Float64 shifts[]) {
+    (void)valueReferences; (void)shifts;
+    return no_variables_of_type(M, nValueReferences, "fmi3GetShiftDecimal");
+}
+fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[]) {
+    (void)valueReferences; (void)counters; (void)resolutions;
+    return no_variables_of_type(M, nValueReferences, "fmi3GetShiftFraction");
+}
+fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                  size_t nValueReferences, const fmi3Float64 intervals[]) {
+    (void)valueReferences; (void)intervals;
+    return no_variables_of_type(M, nValueReferences, "fmi3SetIntervalDecimal");
+}
+fmi3Status fmi3SetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                   size_t nValueReferences, const fmi3UInt64 counters[],
+                                   const fmi3UInt64 resolutions[]) {
+    (void)valueReferences; (void)counters; (void)resolutions;
+    return no_variables_of_type(M, nValueReferences, "fmi3SetIntervalFraction");
+}
+fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                               size_t nValueReferences, const fmi3Float64 shifts[]) {
+    (void)valueReferences; (void)shifts;
+    return no_variables_of_type(M, nValueReferences, "fmi3SetShiftDecimal");
+}
+fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                size_t nValueReferences, const fmi3UInt64 counters[],
+                                const fmi3UInt64 resolutions[]) {
+    (void)valueReferences; (void)counters; (void)resolutions;
+    return no_variables_of_type(M, nValueReferences, "fmi3SetShiftFraction");
+}
+
+fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) { UNSUPPORTED3("fmi3EvaluateDiscreteStates"); }
+fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
+                                    fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                    fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
+                                    fmi3Float64 *nextEventTime) {
+    (void)discreteStatesNeedUpdate; (void)terminateSimulation; (void)nominalsOfContinuousStatesChanged;
+    (void)valuesOfContinuousStatesChanged; (void)nextEventTimeDefined; (void)nextEventTime;
+    UNSUPPORTED3("fmi3UpdateDiscreteStates (no event mode)");
+}
+
+/* model exchange: not supported */
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) { UNSUPPORTED3("fmi3EnterContinuousTimeMode"); }
+fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation) {
+    (void)noSetFMUStatePriorToCurrentPoint; (void)enterEventMode; (void)terminateSimulation;
+    UNSUPPORTED3("fmi3CompletedIntegratorStep");
+}
+fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) { (void)time; UNSUPPORTED3("fmi3SetTime"); }
+fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
+                                   size_t nContinuousStates) {
+    (void)continuousStates; (void)nContinuousStates;
+    UNSUPPORTED3("fmi3SetContinuousStates");
+}
+fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
+                                             size_t nContinuousStates) {
+    (void)derivatives; (void)nContinuousStates;
+    UNSUPPORTED3("fmi3GetContinuousStateDerivatives");
+}
+fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[], size_t nEventIndicators) {
+    (void)eventIndicators; (void)nEventIndicators;
+    UNSUPPORTED3("fmi3GetEventIndicators");
+}
+fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[], size_t nContinuousStates) {
+    (void)continuousStates; (void)nContinuousStates;
+    UNSUPPORTED3("fmi3GetContinuousStates");
+}
+fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[], size_t nContinuousStates) {
+    (void)nominals; (void)nContinuousStates;
+    UNSUPPORTED3("fmi3GetNominalsOfContinuousStates");
+}
+fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
+    (void)nEventIndicators;
+    UNSUPPORTED3("fmi3GetNumberOfEventIndicators");
+}
+fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) {
+    (void)nContinuousStates;
+    UNSUPPORTED3("fmi3GetNumberOfContinuousStates");
+}
+
+/* co-simulation */
+fmi3Status fmi3EnterStepMode(fmi3Instance instance) { UNSUPPORTED3("fmi3EnterStepMode (no event mode)"); }
+fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                    size_t nValueReferences, const fmi3Int32 orders[], fmi3Float64 values[],
+                                    size_t nValues) {
+    (void)valueReferences; (void)nValueReferences; (void)orders; (void)values; (void)nValues;
+    UNSUPPORTED3("fmi3GetOutputDerivatives");
+}
+
+fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
+                      fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
+                      fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
+    (void)noSetFMUStatePriorToCurrentPoint;
+    ModelInstance *m = M;
+    if (!m) return fmi3Error;
+    fmi3Status status = do_step(m, currentCommunicationPoint, communicationStepSize, "fmi3DoStep");
+    if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
+    if (terminateSimulation) *terminateSimulation = fmi3False;
+    if (earlyReturn) *earlyReturn = fmi3False;
+    if (lastSuccessfulTime) *lastSuccessfulTime = m->s->time;
+    return status;
+}
+
+fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
+                                      fmi3Float64 activationTime) {
+    (void)clockReference; (void)activationTime;
+    UNSUPPORTED3("fmi3ActivateModelPartition (no scheduled execution)");
+}
+#endif

@@ -1,0 +1,110 @@
+/* The FMI layer shared by the four native FMUs: the interface between it and a model.
+ *
+ * The native edition of each FMU is one small model file (in plants/ or fmu_src/) plus
+ * fmi_layer.c, compiled once for FMI 2.0 (-DFMI_VERSION=2) and once for FMI 3.0
+ * (-DFMI_VERSION=3) co-simulation.  The build generates model_variables.h from the
+ * Python declaration table (the VARIABLES of each pythonfmu FMU class, see
+ * build_native.py): value references VR_<name>, N_VARIABLES and the table of names,
+ * causalities, starts and valid ranges that the layer validates with.
+ *
+ * The layer mirrors fmu_src/afc_slave_base.py (TableSlave): values in table order,
+ * outputs recomputed lazily once their inputs or the state changed, parameters
+ * validated when initialisation ends, NaN/inf inputs rejected, the FMU state the
+ * whole snapshot (values, internal state, time) and messages worded the same.
+ */
+#ifndef AFC_FMI_LAYER_H
+#define AFC_FMI_LAYER_H
+
+#include <stddef.h>
+
+enum { CAUSALITY_PARAMETER = 0, CAUSALITY_INPUT = 1, CAUSALITY_OUTPUT = 2 };
+
+/* One row of the declaration table (generated into model_variables.h). */
+typedef struct {
+    const char *name;
+    int causality;        /* CAUSALITY_* */
+    int is_integer;       /* kind "Integer" */
+    double start;
+    int has_minimum, exclusive_minimum;
+    double minimum;
+    int has_maximum, exclusive_maximum;
+    double maximum;
+    const char *valid_range; /* Variable.valid_range() of the Python table */
+} VariableInfo;
+
+/* generated: MODEL_IDENTIFIER, MODEL_GUID, N_VARIABLES, VR_<name>, MODEL_FEEDTHROUGH,
+ * MODEL_VARIABLES[] (the table) */
+#include "model_variables.h"
+
+/* Everything the FMU state holds (afc_slave_base TableSlave._state_names):
+ * the variables, time, start time, initialized; the model's internal state
+ * (STATE_ATTRIBUTES) follows it in the same allocation. */
+typedef struct {
+    double time;
+    double start_time;
+    double initialized;
+    double values[N_VARIABLES];
+} Snapshot;
+
+typedef struct ModelInstance ModelInstance;
+
+/* The model's view of an instance. */
+struct ModelInstance {
+    Snapshot *s;           /* values, time: the model reads and writes these */
+    void *internal;        /* the model's internal state, MODEL_INTERNAL_BYTES */
+    int outputs_stale;     /* outputs must be recomputed before they are read */
+    int stale_on_set;      /* setting an input makes the outputs stale */
+    int feedthrough;       /* some output depends directly on an input */
+    int mode;              /* life-cycle state of the FMI layer */
+    int logging_on;
+    char *instance_name;
+    void *host;            /* the layer's logger and environment */
+};
+
+/* Variable access by name: V(m, k1) is the value of variable k1. */
+#define V(m, name) ((m)->s->values[VR_##name])
+
+/* Return codes of the model hooks. */
+enum { MODEL_OK = 0, MODEL_ERROR = 1 };
+
+/* ---- provided by the model file ---- */
+extern const size_t MODEL_INTERNAL_BYTES;
+/* constructor: internal state of a fresh instance (TableSlave.__init__ and subclass) */
+void model_construct(ModelInstance *m);
+/* the state at the end of initialisation (TableSlave.initialize) */
+int model_initialize(ModelInstance *m, double start_time);
+/* outputs from state and inputs, no side effect on the state (compute_outputs) */
+int model_compute_outputs(ModelInstance *m);
+/* advance the state from current_time by step_size (step) */
+int model_step(ModelInstance *m, double current_time, double step_size);
+/* invalid combinations of individually valid parameters (cross_parameter_errors):
+ * writes one message into message and returns MODEL_ERROR, else MODEL_OK */
+int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size);
+
+/* ---- provided by the layer ---- */
+/* log message with status Error ("<instance>: message"), return MODEL_ERROR (TableSlave.fail) */
+int fmu_fail(ModelInstance *m, const char *format, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+/* log a warning ("<instance>: message") */
+void fmu_warn(ModelInstance *m, const char *format, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+/* x as Python's repr(float) writes it (shortest round trip), into buffer (>= 32 chars) */
+const char *py_repr(double x, char *buffer);
+/* several reprs in one message: declare REPRS; in the function, then R(x) gives the text
+ * of x in a buffer of its own (no static or thread-local storage: instances may run in
+ * parallel threads, and the Linux binary needs nothing but libc and libm) */
+typedef struct {
+    char text[12][40];
+    int used;
+} Reprs;
+const char *repr_in(Reprs *reprs, double x);
+#define REPRS Reprs reprs_ = {.used = 0}
+#define R(x) repr_in(&reprs_, (x))
+
+#endif

@@ -1,0 +1,245 @@
+"""The paper's claims (SPEC section 7), each decided only where the numbers can carry it.
+
+Every score comes from a step ladder: the same co-simulation at the communication
+step h and at h/2 (and finer where a comparison needs it).  A score's value is
+the one at the finest step run and its numerical error is the change of that
+score over the last halving, ``|s(h') - s(h'/2)|``.  The co-simulation is first
+order in the step (u held over each step, theta by explicit Euler: the step
+ladders of docs/convergence.md halve their changes per halving), so that change
+estimates the error left in the finer value.  ``ts`` is quantised to the
+communication grid: its error is at least the step of its run.
+
+A comparison "vud below other" is decided only when the gap exceeds the combined
+error (the sum of both errors: discretisation errors are systematic, not random,
+so they are added, not added in quadrature):
+
+* ``vud + err_vud < other - err_other``  -> vud clearly below,
+* ``vud - err_vud > other + err_other``  -> vud clearly above,
+* otherwise "not decided at this accuracy".
+
+A claim over several scenarios is *reproduced* when every comparison is decided in
+its favour, *not reproduced* when at least one is clearly decided against it, and
+otherwise *not decided at this accuracy*.  ``undecided_cases`` names the runs a
+finer step could decide, for the claims whose verdict is still open.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+REPRODUCED = "reproduced"
+NOT_REPRODUCED = "not reproduced"
+UNDECIDED = "not decided at this accuracy"
+VERDICTS = (REPRODUCED, NOT_REPRODUCED, UNDECIDED)
+
+CONTROLLERS = ("vud", "fixed", "fae")
+PENDULUM = ("pendulum_case1", "pendulum_case2", "pendulum_case3")
+ALL_SCENARIOS = (*PENDULUM, "manipulator")
+DISTURBANCE_TOLERANCE = 0.10  # "barely changes": ITAE and IAE within 10 % of case 1
+SMOOTHNESS_TOLERANCE = 1.10  # "smooth": tv_u at most 10 % above the smoothest comparison controller
+GRID_QUANTISED = ("ts",)  # scores read off the communication grid: error at least one step
+
+BELOW, ABOVE, OPEN = "below", "above", "open"
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A score at the finest step run, with its numerical error."""
+
+    value: float
+    error: float  # math.inf when there is no finer/coarser pair to compare
+    step: float
+
+    def scaled(self, factor: float) -> "Estimate":
+        return Estimate(factor * self.value, abs(factor) * self.error, self.step)
+
+    def text(self) -> str:
+        return plus_minus(self.value, self.error)
+
+
+def plus_minus(value: float, error: float) -> str:
+    """``418.222 ± 0.012``: the value to the digits its error leaves meaningful (two of the error)."""
+    if value is None or not math.isfinite(value):
+        return "n/a"
+    if not math.isfinite(error):
+        return f"{value:.6g} ± ?"
+    if error == 0.0:
+        return f"{value:.6g} ± 0"
+    decimals = min(12, max(0, 1 - math.floor(math.log10(error))))
+    return f"{value:.{decimals}f} ± {error:.2g}"
+
+
+def estimate(ladder: list, metric: str) -> Estimate | None:
+    """The score ``metric`` of one (scenario, controller) from its runs at halving steps.
+
+    ``ladder`` holds outcome rows (``step``, ``status`` and the scores), in any order.
+    None when the finest run failed; an infinite error when it has no coarser ok
+    neighbour at twice its step.
+    """
+    runs = sorted(ladder, key=lambda o: o["step"])
+    if not runs or runs[0]["status"] != "ok" or runs[0].get(metric) is None:
+        return None
+    finest = runs[0]
+    coarser = next((o for o in runs[1:] if math.isclose(o["step"], 2 * finest["step"], rel_tol=1e-9)), None)
+    if coarser is None or coarser["status"] != "ok" or coarser.get(metric) is None:
+        error = math.inf
+    else:
+        error = abs(coarser[metric] - finest[metric])
+    if metric in GRID_QUANTISED:
+        error = max(error, finest["step"])
+    return Estimate(float(finest[metric]), error, float(finest["step"]))
+
+
+def compare(low: Estimate, high: Estimate) -> tuple[str, float, float]:
+    """(BELOW | ABOVE | OPEN, gap, combined error): is ``low`` clearly below ``high``?"""
+    gap = high.value - low.value
+    combined = low.error + high.error
+    if gap > combined:
+        return BELOW, gap, combined
+    if -gap > combined:
+        return ABOVE, gap, combined
+    return OPEN, gap, combined
+
+
+def combine(verdicts: list) -> str:
+    """All in favour: reproduced; one clearly against: not reproduced; else not decided."""
+    if any(v == NOT_REPRODUCED for v in verdicts):
+        return NOT_REPRODUCED
+    if verdicts and all(v == REPRODUCED for v in verdicts):
+        return REPRODUCED
+    return UNDECIDED
+
+
+@dataclass
+class Claim:
+    label: str
+    verdict: str
+    details: list = field(default_factory=list)  # one line per scenario (or controller)
+    open_cases: set = field(default_factory=set)  # (scenario, controller) a finer step could decide
+
+
+def _comparisons(name: str, metric: str, ladders: dict, factor: float = 1.0):
+    """vud's ``metric`` against ``factor`` x each comparison controller in one scenario."""
+    estimates = {c: estimate(ladders.get((name, c), []), metric) for c in CONTROLLERS}
+    missing = [c for c, e in estimates.items() if e is None]
+    if missing:
+        return UNDECIDED, f"{name}: no {metric} for {', '.join(missing)} (run failed)", set()
+    vud = estimates["vud"]
+    outcomes, parts, open_cases = [], [], set()
+    for other in ("fixed", "fae"):
+        limit = estimates[other].scaled(factor)
+        outcome, gap, combined = compare(vud, limit)
+        outcomes.append(outcome)
+        relation = {BELOW: "clearly below", ABOVE: "clearly above", OPEN: "undecided"}[outcome]
+        scaled = f"{factor:g} x " if factor != 1.0 else ""
+        parts.append(f"{scaled}{other} {limit.text()} (h = {estimates[other].step:g} s; vud {relation}: "
+                     f"gap {abs(gap):.3g} {'>' if outcome != OPEN else '<='} error {combined:.3g})")
+        if outcome == OPEN:
+            open_cases |= {(name, "vud"), (name, other)}
+    if all(o == BELOW for o in outcomes):
+        verdict = REPRODUCED
+    elif any(o == ABOVE for o in outcomes):
+        verdict = NOT_REPRODUCED
+    else:
+        verdict = UNDECIDED
+    line = f"{name}: vud {vud.text()} (h = {vud.step:g} s) vs " + ", ".join(parts) + f": {verdict}"
+    return verdict, line, open_cases
+
+
+def best_claim(label: str, metric: str, scenario_list, ladders: dict, factor: float = 1.0) -> Claim:
+    verdicts, details, open_cases = [], [], set()
+    for name in scenario_list:
+        verdict, line, cases = _comparisons(name, metric, ladders, factor)
+        verdicts.append(verdict)
+        details.append(line)
+        open_cases |= cases
+    verdict = combine(verdicts)
+    return Claim(label, verdict, details, open_cases if verdict == UNDECIDED else set())
+
+
+def relative_change(two: Estimate, one: Estimate) -> tuple[float, float]:
+    """r = two / one - 1 and its error from both errors (first order, added)."""
+    ratio = two.value / one.value
+    error = (two.error + abs(ratio) * one.error) / abs(one.value)
+    return ratio - 1.0, error
+
+
+def disturbance_claim(ladders: dict) -> Claim:
+    label = (f"The disturbance barely changes the proposed AFC's tracking (case 2 vs case 1: "
+             f"ITAE and IAE within {100 * DISTURBANCE_TOLERANCE:.0f} %)")
+    verdicts, details, open_cases = [], [], set()
+    for controller in CONTROLLERS:
+        changes = []
+        for metric in ("ITAE", "IAE"):
+            one = estimate(ladders.get(("pendulum_case1", controller), []), metric)
+            two = estimate(ladders.get(("pendulum_case2", controller), []), metric)
+            if one is None or two is None or one.value == 0.0:
+                changes.append(f"{metric} n/a (run failed)")
+                if controller == "vud":
+                    verdicts.append(UNDECIDED)
+                continue
+            change, error = relative_change(two, one)
+            changes.append(f"{metric} {100 * change:+.3g} % ± {100 * error:.2g} % "
+                           f"({two.text()} vs {one.text()})")
+            if controller != "vud":
+                continue
+            if abs(change) + error < DISTURBANCE_TOLERANCE:
+                verdicts.append(REPRODUCED)
+            elif abs(change) - error > DISTURBANCE_TOLERANCE:
+                verdicts.append(NOT_REPRODUCED)
+            else:
+                verdicts.append(UNDECIDED)
+                open_cases |= {("pendulum_case1", "vud"), ("pendulum_case2", "vud")}
+        details.append(f"{controller}: case 2 vs case 1: {', '.join(changes)}")
+    verdict = combine(verdicts)
+    return Claim(label, verdict, details, open_cases if verdict == UNDECIDED else set())
+
+
+def claims_check(ladders: dict) -> list:
+    """Every claim of the paper with its verdict, the numbers with their errors, and what is open.
+
+    ``ladders`` maps (scenario, controller) to that case's outcome rows at halving steps
+    (at least h and h/2 for an error; each row with ``step``, ``status`` and the scores).
+    """
+    claims = [
+        best_claim("The proposed AFC has the shortest settling time ts in all four scenarios",
+                   "ts", ALL_SCENARIOS, ladders),
+        best_claim("The proposed AFC has the smallest steady-state error es1 in all four scenarios",
+                   "es1_pct", ALL_SCENARIOS, ladders),
+        best_claim("The proposed AFC has the smallest steady-state error es2 in all four scenarios",
+                   "es2_pct", ALL_SCENARIOS, ladders),
+        best_claim("The proposed AFC has the smallest ITAE in all four scenarios", "ITAE", ALL_SCENARIOS, ladders),
+        best_claim("The proposed AFC has the smallest IAE in all four scenarios", "IAE", ALL_SCENARIOS, ladders),
+        best_claim("The proposed AFC needs the least control energy Ec for the pendulum (cases 1-3)",
+                   "Ec", PENDULUM, ladders),
+        disturbance_claim(ladders),
+        best_claim(f"The proposed AFC's control input is smooth (total variation of u per second at most "
+                   f"{100 * (SMOOTHNESS_TOLERANCE - 1):.0f} % above the smoother comparison controller)",
+                   "tv_u", ALL_SCENARIOS, ladders, factor=SMOOTHNESS_TOLERANCE),
+    ]
+    return claims
+
+
+def undecided_cases(claims: list) -> set:
+    """(scenario, controller) pairs whose finer run could decide a claim still open."""
+    cases = set()
+    for claim in claims:
+        cases |= claim.open_cases
+    return cases
+
+
+def ladders_from_rows(rows: list) -> dict:
+    """Outcome rows (any steps, any order) grouped by (scenario, controller)."""
+    ladders: dict = {}
+    for row in rows:
+        ladders.setdefault((row["scenario"], row["controller"]), []).append(row)
+    return ladders
+
+
+def claims_markdown(claims: list) -> list:
+    """Report lines: one bullet per claim with its verdict, one sub-bullet per comparison."""
+    lines = []
+    for claim in claims:
+        lines.append(f"- **{claim.verdict}**: {claim.label}.")
+        lines += [f"  - {d}" for d in claim.details]
+    return lines

@@ -1,0 +1,210 @@
+"""The verdict logic of the claims check (harness/claims.py) on synthetic step ladders."""
+import math
+
+import pytest
+
+from harness import claims
+from harness.claims import NOT_REPRODUCED, REPRODUCED, UNDECIDED, Estimate
+
+STEP = 4e-4
+METRICS = ("ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec", "tv_u")
+# a comfortable default: vud clearly best in every score, smooth, unchanged by the disturbance
+DEFAULT = {"vud": 1.0, "fixed": 2.0, "fae": 3.0}
+
+
+def outcome(name, controller, step, **scores):
+    return {"scenario": name, "controller": controller, "step": step, "status": "ok", **scores}
+
+
+def ladders(overrides=None, change=1e-4):
+    """{(scenario, controller): [row at h, row at h/2]}; every score DEFAULT[controller] at h/2
+    and that plus ``change`` at h, except ``overrides[(scenario, controller, metric)] = (at h, at h/2)``."""
+    overrides = overrides or {}
+    result = {}
+    for name in claims.ALL_SCENARIOS:
+        for controller in claims.CONTROLLERS:
+            coarse, fine = {}, {}
+            for metric in METRICS:
+                at_h, at_half = overrides.get((name, controller, metric),
+                                              (DEFAULT[controller] + change, DEFAULT[controller]))
+                coarse[metric], fine[metric] = at_h, at_half
+            result[(name, controller)] = [outcome(name, controller, STEP, **coarse),
+                                          outcome(name, controller, STEP / 2, **fine)]
+    return result
+
+
+def claim_on(ladder_set, metric):
+    label = {"ts": "settling time", "es1_pct": "es1", "es2_pct": "es2", "ITAE": "smallest ITAE",
+             "IAE": "smallest IAE", "Ec": "control energy", "tv_u": "smooth"}[metric]
+    return next(c for c in claims.claims_check(ladder_set) if label in c.label)
+
+
+# ------------------------------------------------------------------ estimates
+def test_an_estimate_is_the_finest_value_with_the_change_of_the_last_halving():
+    rows = [outcome("s", "vud", 4e-4, Ec=418.234), outcome("s", "vud", 1e-4, Ec=418.217),
+            outcome("s", "vud", 2e-4, Ec=418.222)]  # any order
+    found = claims.estimate(rows, "Ec")
+    assert found.value == 418.217 and found.step == 1e-4
+    assert found.error == pytest.approx(0.005)
+
+
+def test_an_estimate_without_a_coarser_neighbour_has_an_infinite_error_and_a_failed_run_none():
+    assert claims.estimate([outcome("s", "vud", 2e-4, Ec=1.0)], "Ec").error == math.inf
+    assert claims.estimate([outcome("s", "vud", 8e-4, Ec=1.0), outcome("s", "vud", 2e-4, Ec=1.0)],
+                           "Ec").error == math.inf  # not a halving
+    failed = [outcome("s", "vud", 4e-4, Ec=1.0), {"scenario": "s", "controller": "vud", "step": 2e-4,
+                                                  "status": "diverged"}]
+    assert claims.estimate(failed, "Ec") is None
+
+
+def test_settling_time_is_quantised_to_the_grid_so_its_error_is_at_least_one_step():
+    rows = [outcome("s", "vud", 4e-4, ts=0.6984), outcome("s", "vud", 2e-4, ts=0.6984)]
+    assert claims.estimate(rows, "ts").error == 2e-4
+    assert claims.estimate(rows, "ts").value == 0.6984
+
+
+def test_compare_needs_the_gap_to_exceed_the_sum_of_both_errors():
+    assert claims.compare(Estimate(1.0, 0.1, STEP), Estimate(1.3, 0.1, STEP))[0] == claims.BELOW
+    assert claims.compare(Estimate(1.3, 0.1, STEP), Estimate(1.0, 0.1, STEP))[0] == claims.ABOVE
+    assert claims.compare(Estimate(1.0, 0.1, STEP), Estimate(1.15, 0.1, STEP))[0] == claims.OPEN
+    assert claims.compare(Estimate(1.0, 0.0, STEP), Estimate(1.0, 0.0, STEP))[0] == claims.OPEN  # a tie
+
+
+# ------------------------------------------------------------------ verdicts
+def test_clear_win_everywhere_is_reproduced():
+    for claim in claims.claims_check(ladders()):
+        assert claim.verdict == REPRODUCED, claim
+        assert not claim.open_cases
+
+
+def test_clear_loss_in_one_scenario_is_not_reproduced():
+    ladder_set = ladders({("manipulator", "fae", "ITAE"): (0.5001, 0.5)})  # fae below vud's 1.0
+    claim = claim_on(ladder_set, "ITAE")
+    assert claim.verdict == NOT_REPRODUCED
+    assert "manipulator: vud 1.0" in claim.details[-1] and "clearly above" in claim.details[-1]
+    assert not claim.open_cases  # nothing a finer step could change
+
+
+def test_a_tie_is_not_decided():
+    ladder_set = ladders({("pendulum_case2", "fixed", "IAE"): (1.0001, 1.0)})  # fixed equal to vud
+    claim = claim_on(ladder_set, "IAE")
+    assert claim.verdict == UNDECIDED
+    assert claim.open_cases == {("pendulum_case2", "vud"), ("pendulum_case2", "fixed")}
+
+
+def test_a_gap_below_the_numerical_error_is_not_decided_the_issue_case_1_ec():
+    """The numbers of issue 14: vud 418.234 -> 418.222, fae 418.322 -> 418.169 (0.4 -> 0.2 ms)."""
+    ladder_set = ladders({("pendulum_case1", "vud", "Ec"): (418.234, 418.222),
+                          ("pendulum_case1", "fixed", "Ec"): (430.500, 430.485),
+                          ("pendulum_case1", "fae", "Ec"): (418.322, 418.169)})
+    claim = claim_on(ladder_set, "Ec")
+    assert claim.verdict == UNDECIDED
+    line = claim.details[0]
+    assert "vud 418.222 ± 0.012" in line and "fae 418.17 ± 0.15" in line, line
+    assert "undecided: gap 0.053 <= error 0.165" in line, line
+    assert claim.open_cases == {("pendulum_case1", "vud"), ("pendulum_case1", "fae")}
+    assert claims.undecided_cases(claims.claims_check(ladder_set)) == claim.open_cases
+    # the same gap with small errors is decided: the logic is not "never decide"
+    ladder_set[("pendulum_case1", "fae")][0]["Ec"] = 418.170
+    assert claim_on(ladder_set, "Ec").verdict == NOT_REPRODUCED
+
+
+def test_a_finer_run_decides_what_h_and_h_half_left_open():
+    """Appending the 0.1 ms runs (converged: fae ahead) turns case-1 Ec into not reproduced."""
+    ladder_set = ladders({("pendulum_case1", "vud", "Ec"): (418.234, 418.222),
+                          ("pendulum_case1", "fae", "Ec"): (418.322, 418.169)})
+    ladder_set[("pendulum_case1", "vud")].append(outcome("pendulum_case1", "vud", STEP / 4, Ec=418.217))
+    ladder_set[("pendulum_case1", "fae")].append(outcome("pendulum_case1", "fae", STEP / 4, Ec=418.096))
+    for controller in ("vud", "fae"):  # the other scores of the finer run: unchanged
+        ladder_set[("pendulum_case1", controller)][-1].update(
+            {m: DEFAULT[controller] for m in METRICS if m != "Ec"})
+    claim = claim_on(ladder_set, "Ec")
+    assert claim.verdict == NOT_REPRODUCED
+    assert "h = 0.0001 s" in claim.details[0]
+
+
+def test_one_open_comparison_among_wins_leaves_the_claim_open_and_a_loss_closes_it():
+    open_one = {("pendulum_case3", "fae", "es1_pct"): (1.2, 1.0)}  # vud 1.0 +- 1e-4 vs 1.0 +- 0.2
+    assert claim_on(ladders(open_one), "es1_pct").verdict == UNDECIDED
+    with_loss = {**open_one, ("pendulum_case1", "fixed", "es1_pct"): (0.5, 0.5)}
+    claim = claim_on(ladders(with_loss), "es1_pct")
+    assert claim.verdict == NOT_REPRODUCED and not claim.open_cases
+
+
+def test_a_failed_run_leaves_its_comparisons_undecided():
+    ladder_set = ladders()
+    ladder_set[("pendulum_case2", "fae")][1]["status"] = "diverged"
+    claim = claim_on(ladder_set, "ITAE")
+    assert claim.verdict == UNDECIDED
+    assert any("run failed" in d for d in claim.details)
+
+
+def test_disturbance_claim_within_outside_and_at_the_tolerance():
+    def with_case2(itae_h, itae_half):
+        return ladders({("pendulum_case2", "vud", "ITAE"): (itae_h, itae_half)})
+
+    disturbance = lambda s: next(c for c in claims.claims_check(s) if "disturbance" in c.label)  # noqa: E731
+    assert disturbance(with_case2(1.05, 1.05)).verdict == REPRODUCED  # +5 % +- 0 against 1.0
+    assert disturbance(with_case2(1.20, 1.20)).verdict == NOT_REPRODUCED  # +20 %
+    undecided = disturbance(with_case2(1.12, 1.09))  # +9 % +- 3 %
+    assert undecided.verdict == UNDECIDED
+    assert undecided.open_cases == {("pendulum_case1", "vud"), ("pendulum_case2", "vud")}
+    assert "ITAE +9 % ± 3 %" in undecided.details[0], undecided.details[0]
+
+
+def test_smoothness_allows_ten_percent_above_the_smoother_comparison_controller():
+    smooth = ladders({("manipulator", "vud", "tv_u"): (2.1, 2.1)})  # 1.05 x fixed's 2.0
+    assert claim_on(smooth, "tv_u").verdict == REPRODUCED
+    rough = ladders({("manipulator", "vud", "tv_u"): (2.4, 2.4)})  # 1.2 x fixed
+    assert claim_on(rough, "tv_u").verdict == NOT_REPRODUCED
+    assert "1.1 x fixed 2.2" in claim_on(rough, "tv_u").details[-1]
+
+
+def test_report_lines_name_each_verdict_exactly_once_per_claim():
+    ladder_set = ladders({("pendulum_case1", "fae", "Ec"): (1.5, 0.9)})
+    lines = claims.claims_markdown(claims.claims_check(ladder_set))
+    bullets = [line for line in lines if line.startswith("- **")]
+    assert len(bullets) == 8
+    assert sum(line.startswith(f"- **{UNDECIDED}**") for line in bullets) == 1
+    assert sum(line.startswith(f"- **{REPRODUCED}**") for line in bullets) == 7
+
+
+def test_plus_minus_keeps_two_digits_of_the_error():
+    assert claims.plus_minus(418.2224523, 0.0114751) == "418.222 ± 0.011"
+    assert claims.plus_minus(0.3208236, 1.1e-5) == "0.320824 ± 1.1e-05"
+    assert claims.plus_minus(1.0, 0.0) == "1 ± 0"
+    assert claims.plus_minus(1.0, math.inf) == "1 ± ?"
+
+
+# ------------------------------------------------------------------ refinement (tables --refine)
+def test_refinement_runs_the_open_cases_at_half_their_finest_step_and_decides_again(monkeypatch):
+    """refine_open_claims asks for exactly the cases of open comparisons, at half their finest
+    step, appends their runs and decides again; it stops when nothing is open."""
+    from harness import report_tables
+
+    ladder_set = ladders({("pendulum_case1", "vud", "Ec"): (418.234, 418.222),
+                          ("pendulum_case1", "fixed", "Ec"): (430.500, 430.485),
+                          ("pendulum_case1", "fae", "Ec"): (418.322, 418.169)})
+    for case in (2, 3):  # vud least in the other cases
+        ladder_set[(f"pendulum_case{case}", "fixed")][1]["Ec"] = ladder_set[(f"pendulum_case{case}", "fixed")][0]["Ec"] = 500.0
+        ladder_set[(f"pendulum_case{case}", "fae")][1]["Ec"] = ladder_set[(f"pendulum_case{case}", "fae")][0]["Ec"] = 500.0
+    assert [c.verdict for c in claims.claims_check(ladder_set) if "control energy" in c.label] == [UNDECIDED]
+    finer = {"vud": 418.217, "fae": 418.096}  # the 0.1 ms runs of the step study
+    requested = []
+
+    def fake_run_cases(cases, jobs=None, description="", progress=None):
+        requested.append([(c.scenario, c.controller, c.step) for c in cases])
+        return [outcome(c.scenario, c.controller, c.step,
+                        **{m: DEFAULT[c.controller] for m in METRICS if m != "Ec"}, Ec=finer[c.controller])
+                for c in cases]
+
+    monkeypatch.setattr(report_tables, "run_cases", fake_run_cases)
+    found, refined = report_tables.refine_open_claims(ladder_set, stop=None, jobs=1, levels=3)
+    assert len(requested) == 1  # one level was enough
+    assert sorted(requested[0]) == [("pendulum_case1", "fae", STEP / 4), ("pendulum_case1", "vud", STEP / 4)]
+    assert sorted(refined) == sorted(requested[0])
+    assert [c.verdict for c in found if "control energy" in c.label] == [NOT_REPRODUCED]
+    assert all(c.verdict != UNDECIDED for c in found)
+    requested.clear()
+    assert report_tables.refine_open_claims(ladders(), stop=None, jobs=1, levels=3)[1] == []
+    assert requested == []  # nothing open: nothing run
