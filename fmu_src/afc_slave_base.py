@@ -435,7 +435,7 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
     def _reject(self, vr, value, call="fmi2SetReal"):
         variable = self.VARIABLES[vr]
         if variable.causality == OUTPUT:
-            self.fail(f"{call}: {variable.name} is an output and cannot be set")
+            self.fail(f"{variable.name} is an output and cannot be set")  # the C edition's words too
         if self.terminated:
             self.fail(f"{call}: {variable.name} = {value!r} refused: the FMU was terminated (fmi2Terminate); "
                       "no variable can be set after fmi2Terminate")
@@ -445,7 +445,7 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
                       f"(it keeps {getattr(self, variable.name)!r}); in step mode only inputs can be set")
         if variable.causality == PARAMETER:
             self.fail(variable.check(value))
-        self.fail(f"{call}: input {variable.name} = {value!r} is not finite")
+        self.fail(f"input {variable.name} = {value!r} is not finite")
 
     def get_real(self, vrs):
         try:
