@@ -29,6 +29,12 @@ def pytest_sessionstart(session):
     _TEMP_BEFORE.update(os.listdir(tempfile.gettempdir()))
 
 
+def pytest_sessionfinish(session):
+    host = sys.modules.get("tests.plain_fmpy_host")
+    if host is not None:
+        host.remove_extractions()
+
+
 def pytest_terminal_summary(terminalreporter):
     folder = tempfile.gettempdir()
     left = sorted(name for name in set(os.listdir(folder)) - _TEMP_BEFORE if not name.startswith("pytest-of-"))
