@@ -50,6 +50,9 @@ FMUS = (
               (BASE, ROOT / "plants" / "manipulator_model.py",
                ROOT / "plants" / "plant_integration.py", ROOT / "plants" / "rk4_plant_slave.py")),
     FmuSource("TrackingReference", ROOT / "plants" / "tracking_reference_fmu.py", (BASE,)),
+    FmuSource("DcMotorArm", ROOT / "plants" / "dc_motor_arm_fmu.py",
+              (BASE, ROOT / "plants" / "dc_motor_arm_model.py",
+               ROOT / "plants" / "plant_integration.py", ROOT / "plants" / "rk4_plant_slave.py")),
 )
 
 

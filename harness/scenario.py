@@ -21,7 +21,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 CONTROLLER_VARIANTS = {"vud": 1, "fixed": 2, "fae": 3}
-SIGNAL_ROLES = ("e", "de", "ym", "dym", "u")
+SIGNAL_ROLES = ("e", "de", "ym", "dym", "u", "d2e", "d3e")  # d2e, d3e: plants of order 3, 4
 
 
 class ScenarioError(ValueError):

@@ -131,7 +131,7 @@ def test_divergence_keeps_the_partial_result_in_the_exception(fmu_paths):
 
 @pytest.mark.parametrize("edit,expected", [
     (lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "NoSuchModel"'),
-     "unknown FMU 'NoSuchModel'; valid: AdaptiveFuzzyController, InvertedPendulum"),
+     "unknown FMU 'NoSuchModel'; valid: AdaptiveFuzzyController, DcMotorArm, InvertedPendulum"),
     (lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "missing/Reference.fmu"'), "FMU file not found"),
     (lambda t: t.replace('from = "plant.y"', 'from = "plnt.y"'),
      "unknown instance 'plnt'; valid: plant, reference, controller"),
@@ -161,7 +161,7 @@ def test_algebraic_loop_is_a_clear_error(fmu_paths, tmp_path):
 
 
 def test_unknown_scenario_and_controller_list_valid_names():
-    with pytest.raises(ScenarioError, match="valid: manipulator, pendulum_case1"):
+    with pytest.raises(ScenarioError, match="valid: manipulator, motor_arm, pendulum_case1"):
         scenarios.load("pendulum_case9")
     with pytest.raises(ScenarioError, match="valid: vud, fixed, fae"):
         scenarios.load("pendulum_case1").with_controller("pid")

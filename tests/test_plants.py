@@ -355,7 +355,8 @@ def test_model_structure_declares_the_true_dependencies(plant_fmus):
     expected = {
         "InvertedPendulum": {"y": [], "dy": [], "d": []},
         "Manipulator": {"y": [], "dy": [], "d": [], "mr": []},
-        "TrackingReference": {"ym": [], "dym": [], "ddym": [], "e": ["y"], "de": ["dy"]},
+        "TrackingReference": {"ym": [], "dym": [], "ddym": [], "e": ["y"], "de": ["dy"], "d2e": ["d2y"]},
+        "DcMotorArm": {"y": [], "dy": [], "d2y": [], "i": []},
     }
     for name, (path, _) in plant_fmus.items():
         md = read_model_description(str(path))
