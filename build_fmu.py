@@ -70,8 +70,29 @@ def build_script(script: Path, fmu_path: Path, project_files) -> Path:
     import ``pythonfmu`` from that FMU's resources (which hold no binaries).
     The folders of the project files go on PYTHONPATH, so the script's own
     imports resolve while the builder reads its model description.
+
+    The builder writes a temporary file in the same folder, which then replaces
+    ``fmu_path`` in one step (``os.replace``): a reader never sees a half-written
+    FMU, and two builds at once each replace the file whole.
     """
+    import tempfile
+
     fmu_path.parent.mkdir(parents=True, exist_ok=True)
+    handle, partial = tempfile.mkstemp(dir=fmu_path.parent, prefix=f".{fmu_path.stem}.", suffix=".fmu")
+    os.close(handle)
+    try:
+        _run_builder(script, Path(partial), project_files, fmu_path.name)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(partial, 0o666 & ~umask)  # as an ordinary new file (mkstemp makes it private)
+        os.replace(partial, fmu_path)
+    finally:
+        if os.path.exists(partial):
+            os.remove(partial)
+    return fmu_path
+
+
+def _run_builder(script: Path, fmu_path: Path, project_files, label: str):
     folders = list(dict.fromkeys(str(Path(p).resolve().parent) for p in (script, *project_files)))
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join(folders + [os.environ.get("PYTHONPATH", "")]))
     code = ("import sys; from pythonfmu.builder import FmuBuilder; "
@@ -80,8 +101,7 @@ def build_script(script: Path, fmu_path: Path, project_files) -> Path:
     completed = subprocess.run([sys.executable, "-c", code, str(script), str(fmu_path),
                                 *map(str, project_files)], env=environment, capture_output=True, text=True)
     if completed.returncode != 0:
-        raise RuntimeError(f"building {fmu_path.name} from {script} failed:\n{completed.stderr}")
-    return fmu_path
+        raise RuntimeError(f"building {label} from {script} failed:\n{completed.stderr}")
 
 
 def build(fmu: FmuSource) -> Path:

@@ -29,6 +29,8 @@ def run_command(args) -> int:
     cli_args.check_output_interval(args.output_interval, scenario.step)
     progress, close = _progress_bar(scenario.steps, f"{scenario.name}/{args.controller}",
                                     enabled=not args.json and sys.stderr.isatty())
+    for note in scenario.notes:  # e.g. the stop moved to a whole number of steps
+        print(f"note: {note}", file=sys.stderr)
     try:
         result = simulate(scenario, algorithm=args.algorithm, progress=progress)
     except SimulationFailed as failure:

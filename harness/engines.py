@@ -56,8 +56,11 @@ Ecos (ecospy 0.7)
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import functools
+import os
+import sys
 import time as clock
 import xml.etree.ElementTree as ElementTree
 import zipfile
@@ -240,6 +243,31 @@ def import_ecospy():
     return ecospy
 
 
+@contextlib.contextmanager
+def ecos_temp_dir():
+    """A private temporary folder for one Ecos run, removed afterwards with all it holds.
+
+    Ecos unpacks the SSP and every FMU into ``ecos_*`` folders of the temporary
+    directory (``TMPDIR``) and leaves them there (about 20 MB a run).  TMPDIR points
+    at a folder of our own while the simulation lives; then it is restored and the
+    folder removed, so nothing is left and no other process's folders are touched.
+    """
+    import shutil
+    import tempfile
+
+    folder = tempfile.mkdtemp(prefix="afc_ecos_")
+    previous = os.environ.get("TMPDIR")
+    os.environ["TMPDIR"] = folder
+    try:
+        yield folder
+    finally:
+        if previous is None:
+            os.environ.pop("TMPDIR", None)
+        else:
+            os.environ["TMPDIR"] = previous
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def run_ecos(ssp_path, stop: float | None = None, step: float | None = None, variables=None,
              parameter_set: str | None = "package", log_level: str = "warn") -> EngineResult:
     """Run the package in Ecos; values read with get_real after init and after every step.
@@ -258,22 +286,23 @@ def run_ecos(ssp_path, stop: float | None = None, step: float | None = None, var
     values = np.empty((steps + 1, len(columns)))
     raw_time = np.empty(steps + 1)
     wall = clock.perf_counter()
-    simulation = ecospy.EcosSimulation(ssp_path=str(ssp_path), step_size=step)
-    try:
-        if parameter_set is None:
-            simulation.init(start_time=start)
-        else:
-            simulation.init(start_time=start, parameter_set=parameter_set)
-        get_real = simulation.get_real
-        for k in range(steps + 1):
-            if k:
-                raw_time[k] = simulation.step(1)
+    with ecos_temp_dir():
+        simulation = ecospy.EcosSimulation(ssp_path=str(ssp_path), step_size=step)
+        try:
+            if parameter_set is None:
+                simulation.init(start_time=start)
             else:
-                raw_time[k] = simulation.get_time()
-            values[k] = [get_real(identifier) for identifier in identifiers]
-        simulation.terminate()
-    finally:
-        simulation.free()
+                simulation.init(start_time=start, parameter_set=parameter_set)
+            get_real = simulation.get_real
+            for k in range(steps + 1):
+                if k:
+                    raw_time[k] = simulation.step(1)
+                else:
+                    raw_time[k] = simulation.get_time()
+                values[k] = [get_real(identifier) for identifier in identifiers]
+            simulation.terminate()
+        finally:
+            simulation.free()
     wall = clock.perf_counter() - wall
     time = start + np.arange(steps + 1) * step
     return EngineResult("ecos", time, columns, values, wall, raw_time=raw_time,
@@ -408,6 +437,8 @@ def compare_command(args) -> int:
     from . import scenario as scenarios
 
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
+    for note in scenario.notes:
+        print(f"note: {note}", file=sys.stderr)
     with tempfile.TemporaryDirectory(prefix="afc_engines_") as directory:
         results = run_all(scenario, directory, workers=args.workers)
     start = scenario.start + args.skip_steps * scenario.step if args.skip_steps else None

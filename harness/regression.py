@@ -25,9 +25,9 @@ per worker, no state shared with a parent that may hold loaded FMUs).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import datetime
 import io
-import functools
 import json
 import os
 import platform
@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from . import scenario as scenarios
+from .cases import Case
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE_DIR = Path(__file__).resolve().parent / "references"
@@ -56,33 +57,10 @@ VALUE_FORMAT = "%.10g"  # 10 significant digits: 1e-10 relative, far inside the 
 DEFAULT_TOLERANCES = {"atolx": 1e-3, "atoly": 0.0, "ltolx": 0.0, "ltoly": 1e-3, "rtolx": 0.0, "rtoly": 1e-3}
 
 
-@dataclass(frozen=True)
-class Case:
-    scenario: str
-    controller: str
-    overrides: tuple = ()  # (("controller.gamma", 290.0), ...): a mutated run, compared with the same reference
-
-    @property
-    def name(self) -> str:
-        return f"{self.scenario}_{self.controller}"
-
-    @property
-    def label(self) -> str:
-        if not self.overrides:
-            return self.name
-        return self.name + " [" + ", ".join(f"{k}={v:g}" for k, v in self.overrides) + "]"
-
-    def scenario_object(self):
-        result = scenarios.load(self.scenario).with_controller(self.controller)
-        for dotted, value in self.overrides:
-            result = result.with_parameter(dotted, value)
-        return result
-
-
 def all_cases(names=None, controllers=None, overrides=()) -> list[Case]:
     names = list(names or scenarios.scenario_names())
     controllers = list(controllers or scenarios.CONTROLLER_VARIANTS)
-    return [Case(n, c, tuple(overrides)) for n in names for c in controllers]
+    return [Case(n, c, overrides=tuple(overrides)) for n in names for c in controllers]
 
 
 def reference_paths(case: Case, directory: Path = REFERENCE_DIR) -> tuple[Path, Path]:
@@ -102,43 +80,18 @@ class CaseRun:
     error: str | None = None  # the run failed (message); signals then hold what was computed
 
 
-def resample(time: np.ndarray, values: np.ndarray, start: float, stop: float, points: int) -> tuple:
-    grid = np.linspace(start, stop, points)
-    if len(time) == 0:
-        return grid, np.full(points, np.nan)
-    inside = grid <= time[-1] + 1e-12
-    resampled = np.full(points, np.nan)
-    resampled[inside] = np.interp(grid[inside], time, values)
-    return grid, resampled
-
-
-def run_case(case: Case, fmu_paths: dict | None = None, points: int = POINTS) -> CaseRun:
-    """Simulate one case with our master (feedthrough) and resample its comparison signals."""
-    from .master import SimulationFailed, simulate
-
-    scenario = case.scenario_object()
-    wall = clock.perf_counter()
-    error = None
-    try:
-        result = simulate(scenario, fmu_paths=fmu_paths)
-    except SimulationFailed as failure:
-        result, error = failure.result, str(failure)
-    wall = clock.perf_counter() - wall
-    signals, grid = {}, None
-    for name in SIGNALS:
-        grid, signals[name] = resample(result.time, result.signal(name), scenario.start, scenario.stop, points)
-    return CaseRun(case, scenario.start, scenario.stop, scenario.step, grid, signals, wall, error)
-
-
 def run_cases(cases, workers: int | None = None, fmu_paths: dict | None = None, points: int = POINTS) -> list:
-    """Run the cases in a process pool (every core by default); results in the order of ``cases``."""
-    if fmu_paths is None:
-        import build_fmu
+    """Run the cases with the shared runner (a process pool, every core by default), resampled for comparison.
 
-        fmu_paths = build_fmu.ensure_built()
-    from .cases import parallel_map
+    Results in the order of ``cases``; a failed run keeps what it computed (NaN after it stopped).
+    """
+    from . import cases as shared
 
-    return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths, points=points), cases, workers)
+    wanted = [dataclasses.replace(case, points=points, signals=SIGNALS, figure_interval=None) for case in cases]
+    outcomes = shared.run_cases(wanted, jobs=workers, fmu_paths=fmu_paths, progress=False)
+    return [CaseRun(case, outcome["start"], outcome["stop"], outcome["step"], outcome["time"], outcome["signals"],
+                    outcome["wall_s"], outcome["reason"] if outcome["status"] != "ok" else None)
+            for case, outcome in zip(cases, outcomes)]
 
 
 # --------------------------------------------------------------- references

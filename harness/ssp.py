@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import copy
 import datetime
+import sys
 import zipfile
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
@@ -189,6 +190,8 @@ def export_command(args) -> int:
     cli_args.check_assignments(scenarios.load(args.scenario), overrides)
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop, overrides)
     out = args.out or str(Path("results") / f"{scenario.name}_{args.controller}.ssp")
+    for note in scenario.notes:  # e.g. the stop moved to a whole number of steps
+        print(f"note: {note}", file=sys.stderr)
     path = export_ssp(scenario, out, start_inputs=args.start_inputs)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB): {', '.join(scenario.components)}; "
           f"parameter set '{PARAMETER_SET}'"

@@ -31,10 +31,10 @@ RTOL, ATOL = 1e-10, 1e-12  # solve_ivp reference tolerances
 
 # ----------------------------------------------------------------- helpers
 @pytest.fixture(scope="session")
-def plant_fmus():
-    """{model identifier: (path, unzip directory)}; built once, only if stale."""
+def plant_fmus(tmp_path_factory):
+    """{model identifier: (path, unzip directory)}; built once, only if stale; extracted into pytest's tmp."""
     paths = build_fmu.ensure_built()
-    return {name: (paths[name], extract(str(paths[name]))) for name in PLANTS}
+    return {name: (paths[name], extract(str(paths[name]), str(tmp_path_factory.mktemp(name)))) for name in PLANTS}
 
 
 class Instance(Driven):

@@ -14,7 +14,7 @@ from harness import regression
 from harness.cli import main as cli_main
 from harness.regression import Case, CaseRun
 
-MUTATION = Case("pendulum_case1", "vud", (("controller.gamma", 290.0),))
+MUTATION = Case("pendulum_case1", "vud", overrides=(("controller.gamma", 290.0),))
 
 
 @pytest.fixture(scope="session")
