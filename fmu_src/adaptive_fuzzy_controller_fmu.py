@@ -10,13 +10,19 @@ Co-simulation semantics:
 * doStep(t, h) advances theta (and w_hat for variant 3) over the step with
   the inputs held at their values at t: the sampled-data update
   ``theta += h * dtheta(t)`` (explicit Euler) that an embedded target runs.
-* e(0), de(0) of the modified error (Remark 3) and its time origin come from
-  the inputs, robust to hosts that hand placeholders at initialisation
-  (``initial_error_latch``, docs/host_robustness.md), or from parameters.
+* e(0), de(0), ..., e^(n-1)(0) of the modified error (Remark 3, (36)) and
+  its time origin come from the inputs, robust to hosts that hand
+  placeholders at initialisation (``initial_error_latch``,
+  docs/host_robustness.md), or from parameters.
 * The controller watches its own u for chatter (``chatter_monitor``) and
   warns once, naming the step and the remedy.
+* order n and sets m (Integer parameters, appended to the table) make it the
+  controller of an nth-order plant with m fuzzy sets per input: wire e, de,
+  ..., e^(n-1) (and ym, ..., ym^(n-1) for fls_input = 2); M = m^n rule
+  weights theta1..thetaM; docs/general_order.md.
 """
 import math
+from operator import itemgetter
 
 import afc_math
 import chatter_monitor
@@ -29,8 +35,8 @@ from afc_slave_base import TableSlave as Fmi2Slave
 
 DIMENSIONLESS = ""
 _INF = math.inf
-FEEDTHROUGH = ("e", "de", "ym", "dym")
-ERROR_INPUTS = ("e", "de")  # the error vector [e, de, ...] of the plant's order n
+# u depends on every error and reference input: n is a parameter (ym.. with fls_input = 2)
+FEEDTHROUGH = ("e", "de", "ym", "dym", "d2e", "d3e", "d2ym", "d3ym")
 INITIAL_ERROR_PARAMETERS = ("e0", "de0", "d2e0", "d3e0")  # pinned x(0), first n used
 INITIAL_ERROR_FROM_INPUTS = 1
 INITIAL_ERROR_PINNED = 2
@@ -67,9 +73,9 @@ VARIABLES = (
     Variable("E", OUTPUT, 0.0, description="modified tracking error E (Remark 3)", depends_on=("e", "de")),
     Variable("dE", OUTPUT, 0.0, description="its time derivative dE", depends_on=("e", "de")),
     Variable("alpha1", OUTPUT, 1.0, description="contraction-expansion factor of input 1 (23)",
-             depends_on=FEEDTHROUGH),
+             depends_on=("e", "de", "ym", "dym")),
     Variable("alpha2", OUTPUT, 1.0, description="contraction-expansion factor of input 2 (23)",
-             depends_on=FEEDTHROUGH),
+             depends_on=("e", "de", "ym", "dym")),
     Variable("theta1", OUTPUT, 0.0, description="rule weight theta_1 (rule (1,1))"),
     Variable("theta2", OUTPUT, 0.0, description="rule weight theta_2 (rule (1,2))"),
     Variable("theta3", OUTPUT, 0.0, description="rule weight theta_3 (rule (2,1))"),
@@ -83,12 +89,55 @@ VARIABLES = (
     finite("de0", 0.0, description="pinned de(0) (initial_error = 2)"),
     finite("d2e0", 0.0, description="pinned d2e(0) (initial_error = 2, plant order n >= 3)"),
     finite("d3e0", 0.0, description="pinned d3e(0) (initial_error = 2, plant order n = 4)"),
+    # ---- the general controller (order n, m sets per input): appended rows, so the value
+    # references above keep their numbers; entries beyond n are unused but validated
+    Variable("order", PARAMETER, 2, kind="Integer", minimum=1, maximum=afc_math.ORDER_MAX,
+             description="plant order n: FLS inputs [E, dE, ..., E^(n-1)], M = sets^order rules"),
+    Variable("sets", PARAMETER, 2, kind="Integer", minimum=2, maximum=afc_math.SETS_MAX,
+             description=f"fuzzy sets m per FLS input (sets^order <= {afc_math.RULES_MAX})"),
+    positive("k3", 0.5, description="Hurwitz gain k3 of s^n + k1 s^(n-1) + ... + kn (n >= 3); "
+                                    "0.5 keeps s^3 + 2 s^2 + s + 0.5 Hurwitz with the default k1, k2"),
+    positive("k4", 0.1, description="Hurwitz gain k4 (n = 4); 0.1 keeps s^4 + 2 s^3 + s^2 + 0.5 s + 0.1 "
+                                    "Hurwitz with the default k1..k3"),
+    positive("q3", 10.0, description="Q = diag(q1, ..., qn) of (30) (n >= 3); 10 as q1, q2"),
+    positive("q4", 10.0, description="Q = diag(q1, ..., qn) of (30) (n = 4); 10 as q1, q2"),
+    positive("kappa3", 10.0, description="contraction-expansion width kappa_3 (23) (n >= 3); 10 as kappa1, 2"),
+    positive("kappa4", 10.0, description="contraction-expansion width kappa_4 (23) (n = 4); 10 as kappa1, 2"),
+    positive("E3", math.pi / 3, description="universe [-E3, E3] of FLS input 3 (n >= 3); as E1, E2"),
+    positive("E4", math.pi / 3, description="universe [-E4, E4] of FLS input 4 (n = 4); as E1, E2"),
+    Variable("d2e", INPUT, 0.0, description="tracking error acceleration d2e = d2ym - d2y (n >= 3)"),
+    Variable("d3e", INPUT, 0.0, description="third derivative of the tracking error d3e (n = 4)"),
+    Variable("d2ym", INPUT, 0.0, description="reference acceleration d2ym (fls_input = 2, n >= 3)"),
+    Variable("d3ym", INPUT, 0.0, description="third derivative of the reference d3ym (fls_input = 2, n = 4)"),
+    Variable("d2E", OUTPUT, 0.0, description="second derivative of the modified error (36) (n >= 3; else 0)",
+             depends_on=("d2e",)),
+    Variable("d3E", OUTPUT, 0.0, description="third derivative of the modified error (36) (n = 4; else 0)",
+             depends_on=("d3e",)),
+    Variable("alpha3", OUTPUT, 1.0, description="contraction-expansion factor of input 3 (23) (n >= 3; else 1)",
+             depends_on=("d2e", "d2ym")),
+    Variable("alpha4", OUTPUT, 1.0, description="contraction-expansion factor of input 4 (23) (n = 4; else 1)",
+             depends_on=("d3e", "d3ym")),
+    *(Variable(f"theta{j}", OUTPUT, 0.0, description=f"rule weight theta_{j} (0 when {j} > sets^order)")
+      for j in range(5, afc_math.RULES_MAX + 1)),
 )
+ERROR_INPUTS = ("e", "de", "d2e", "d3e")  # e^(i), i = 0..3
+REFERENCE_INPUTS = ("ym", "dym", "d2ym", "d3ym")
+ERROR_OUTPUTS = ("E", "dE", "d2E", "d3E")
+ALPHA_OUTPUTS = ("alpha1", "alpha2", "alpha3", "alpha4")
+THETA_OUTPUTS = tuple(f"theta{j}" for j in range(1, afc_math.RULES_MAX + 1))
+
+
+def _vector_getter(names):
+    """d -> (d[names[0]], ...) as a tuple, also for one name."""
+    if len(names) == 1:
+        return lambda attributes, name=names[0]: (attributes[name],)
+    return itemgetter(*names)
+
 
 
 class AdaptiveFuzzyController(Fmi2Slave):
     VARIABLES = VARIABLES
-    STATE_ATTRIBUTES = ("latch", "chatter", "p12", "p22", "xi")
+    STATE_ATTRIBUTES = ("latch", "chatter", "theta", "xi", "modified")
     MODEL_DESCRIPTION = ("Direct adaptive fuzzy controller with variable universes of discourse "
                          "(Pan, Er, Huang, Wang, IEEE TFS 2011)")
 
@@ -99,83 +148,136 @@ class AdaptiveFuzzyController(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.latch = [0.0] * latch_rule.size(len(ERROR_INPUTS))
+        self.latch = [0.0] * latch_rule.size(2)
         self.chatter = chatter_monitor.new_state()
-        self.p12 = self.p22 = 0.0
-        self.xi = [0.25, 0.25, 0.25, 0.25]
+        self.theta = [0.0] * afc_math.RULE_COUNT
+        self.xi = (0.25, 0.25, 0.25, 0.25)
+        self.modified = (0.0, 0.0)
+        self._p = None
+
+    def cross_parameter_errors(self):
+        n, m = self.order, self.sets
+        if m ** n > afc_math.RULES_MAX:
+            return [f"parameters order = {n}, sets = {m} give m^n = {m ** n} rules, above the bound "
+                    f"{afc_math.RULES_MAX}; valid: sets^order <= {afc_math.RULES_MAX} "
+                    f"(every sets 2..{afc_math.SETS_MAX} up to order 3, sets <= 3 at order 4)"]
+        k = tuple(getattr(self, f"k{i}") for i in range(1, n + 1))
+        q = tuple(getattr(self, f"q{i}") for i in range(1, n + 1))
+        try:
+            hurwitz = afc_math.is_positive_definite(afc_math.lyapunov_p(k, q))
+        except ValueError:
+            hurwitz = False
+        if not hurwitz:
+            polynomial = " + ".join([f"s^{n}"] + [f"{k[i - 1]!r} s^{n - i}" if n - i else f"{k[i - 1]!r}"
+                                                  for i in range(1, n + 1)])
+            return [f"parameters k1..k{n} = {k!r} are invalid for order = {n}: {polynomial} is not Hurwitz "
+                    "(no positive definite P in (30)); valid: k with every root of the polynomial in the "
+                    f"left half-plane, e.g. the coefficients of (s + 1)^{n}"]
+        return []
+
+    def _configure(self):
+        """The constants of the per-step path (afc_math.controller_parameters, P B, boundaries,
+        the inputs and outputs in use) from the current parameters."""
+        n = self.order
+        self._p = afc_math.controller_parameters(
+            {v.name: getattr(self, v.name) for v in VARIABLES if v.causality == PARAMETER})
+        self._error_inputs = ERROR_INPUTS[:n]
+        self._error_vector = _vector_getter(ERROR_INPUTS[:n])
+        self._reference_vector = _vector_getter(REFERENCE_INPUTS[:n])
+        self._error_outputs = ERROR_OUTPUTS[:n]
+        self._alpha_outputs = ALPHA_OUTPUTS[:n]
+        self._theta_outputs = THETA_OUTPUTS[:self._p["rules"]]
+        self._p_b = self._p["p_b"]
+        self._default_shape = n == 2 and self.sets == 2
+
+    def _latch_initial_error(self):
+        """e(t0), de(t0), ..., e^(n-1)(t0) and t0 of the modified error (36), from the latch rule's state."""
+        afc_math.latch_error(self._p, latch_rule.latched(self.latch), self.latch[latch_rule.ORIGIN])
 
     def initialize(self, start_time):
-        _, self.p12, self.p22 = afc_math.lyapunov_p(self.k1, self.k2, self.q1, self.q2)
-        self.latch = [0.0] * latch_rule.size(len(ERROR_INPUTS))  # n = the error vector's length
+        self._configure()
+        n = self.order
+        self.latch = [0.0] * latch_rule.size(n)  # n = the error vector's length
         if self.initial_error == INITIAL_ERROR_PINNED:
             latch_rule.pin(self.latch, start_time, [getattr(self, name) for name in INITIAL_ERROR_PARAMETERS])
         else:  # tentative: checked over the first doSteps (Remark 3, initial_error_latch)
-            latch_rule.start(self.latch, start_time, [getattr(self, name) for name in ERROR_INPUTS])
+            latch_rule.start(self.latch, start_time, self._error_vector(self.__dict__))
+        self._latch_initial_error()
         chatter_monitor.start(self.chatter)
+        rules = self._p["rules"]
+        attributes = self.__dict__
+        attributes.update(dict.fromkeys(THETA_OUTPUTS[rules:], 0.0))
+        attributes.update(dict.fromkeys(ERROR_OUTPUTS[n:], 0.0))
+        attributes.update(dict.fromkeys(ALPHA_OUTPUTS[n:], 1.0))
         self.restart_adaptation()
 
     def restart_adaptation(self):
-        self.theta1 = self.theta2 = self.theta3 = self.theta4 = float(self.theta0)
+        self.theta = [float(self.theta0)] * self._p["rules"]
+        self.__dict__.update(zip(self._theta_outputs, self.theta))
         self.w_hat = 0.0
 
     def watch_initial_error(self, time):
         """Let the latch rule see this doStep's inputs; restart on a re-latch, warn once."""
-        events = latch_rule.observe(self.latch, time, [getattr(self, name) for name in ERROR_INPUTS])
+        events = latch_rule.observe(self.latch, time, self._error_vector(self.__dict__))
         if events & latch_rule.RELATCHED:
+            self._latch_initial_error()
             self.restart_adaptation()
             self.compute_outputs()  # E, dE, xi of this step from the new latch
         if events & latch_rule.DECIDED:
-            message = latch_rule.warning(self.latch, ERROR_INPUTS)
+            message = latch_rule.warning(self.latch, self._error_inputs)
             if message:
                 self.warn(message)
 
+    def _set_fmu_state(self, state):
+        super()._set_fmu_state(state)
+        if self.initialized:  # the constants follow the restored parameters and latch
+            self._configure()
+            self._latch_initial_error()
+
     def compute_outputs(self):
-        lambda_e = self.lambda_e
-        e, de = self.e, self.de
-        latch = self.latch  # x(t0) and t0 (initial_error_latch)
-        error, error_rate = afc_math.modified_error(
-            e, de, self.time - latch[latch_rule.ORIGIN], latch[latch_rule.LATCHED], latch[latch_rule.LATCHED + 1],
-            lambda_e)
-        x1, x2 = afc_math.fls_inputs(e, de, self.ym, self.dym, error, error_rate, self.fls_input)
-        variant = self.variant
-        if variant == afc_math.VARIANT_VUD:
-            alpha1 = afc_math.contraction_factor(x1, self.lambda_ce, self.kappa1)
-            alpha2 = afc_math.contraction_factor(x2, self.lambda_ce, self.kappa2)
+        attributes = self.__dict__
+        error = self._error_vector(attributes)
+        reference = self._reference_vector(attributes)
+        u, modified, alpha, xi = afc_math.controller_output(error, reference, self.time, self.theta,
+                                                            self.w_hat, self._p)
+        if not -_INF < u + sum(modified) < _INF:  # u or some E^(i) is NaN or inf (or all overflow together)
+            self._overflow(u, modified, error)
+        self.u = u
+        if self._default_shape:  # n = 2, m = 2 unrolled: the per-step path
+            self.E, self.dE = modified
+            self.alpha1, self.alpha2 = alpha
         else:
-            alpha1 = alpha2 = 1.0
-        xi = afc_math.fuzzy_basis(afc_math.normalized_input(x1, alpha1, self.E1),
-                                  afc_math.normalized_input(x2, alpha2, self.E2), self.mf_slope)
-        u = self.theta1 * xi[0] + self.theta2 * xi[1] + self.theta3 * xi[2] + self.theta4 * xi[3]
-        if variant == afc_math.VARIANT_FAE:
-            u += self.w_hat
-        if not (-_INF < u < _INF and -_INF < error < _INF and -_INF < error_rate < _INF):  # also NaN
-            self.fail(f"outputs overflow at t = {self.time!r}: u = {u!r}, E = {error!r}, dE = {error_rate!r} "
-                      f"from e = {e!r}, de = {de!r} (latched e(0), de(0) = {latch_rule.latched(latch)!r}); "
-                      "the inputs are out of range or the closed loop diverged")
-        self.u, self.E, self.dE, self.alpha1, self.alpha2 = u, error, error_rate, alpha1, alpha2
+            attributes.update(zip(self._error_outputs, modified))
+            attributes.update(zip(self._alpha_outputs, alpha))
+        self.modified = modified
         self.xi = xi  # a tuple; the FMU state stores it as a list
         self.outputs_stale = False
+
+    def _overflow(self, u, modified, error):
+        self.fail(f"outputs overflow at t = {self.time!r}: u = {u!r}, E = {modified!r} from "
+                  f"{', '.join(f'{name} = {value!r}' for name, value in zip(self._error_inputs, error))} "
+                  f"(latched at t0 = {self.latch[latch_rule.ORIGIN]!r}: {latch_rule.latched(self.latch)!r}); "
+                  "the inputs are out of range or the closed loop diverged")
 
     def step(self, current_time, step_size):
         if self.latch[latch_rule.OPEN]:  # the first few doSteps only
             self.watch_initial_error(current_time)
-        tau = afc_math.adaptation_signal(self.E, self.dE, self.p12, self.p22)
-        gamma, m_theta, delta = self.gamma, self.m_theta, self.delta
-        rate = afc_math.projected_rate
-        xi = self.xi
-        theta1 = self.theta1 + step_size * rate(self.theta1, tau, xi[0], gamma, m_theta, delta)
-        theta2 = self.theta2 + step_size * rate(self.theta2, tau, xi[1], gamma, m_theta, delta)
-        theta3 = self.theta3 + step_size * rate(self.theta3, tau, xi[2], gamma, m_theta, delta)
-        theta4 = self.theta4 + step_size * rate(self.theta4, tau, xi[3], gamma, m_theta, delta)
+        tau = afc_math.adaptation_signal(self.modified, self._p_b)
+        theta = afc_math.adapted_weights(self.theta, tau, self.xi, self.gamma, self.m_theta, self.delta,
+                                         step_size)
         w_hat = self.w_hat
         if self.variant == afc_math.VARIANT_FAE:
             w_hat += step_size * self.gamma_w * tau
-        if not (-_INF < theta1 < _INF and -_INF < theta2 < _INF and -_INF < theta3 < _INF
-                and -_INF < theta4 < _INF and -_INF < w_hat < _INF):  # also False for NaN
+        if not -_INF < w_hat + sum(theta) < _INF:  # some theta or w_hat is NaN or inf (or all overflow together)
             self.fail(f"adaptation diverged in doStep(t={current_time!r}, h={step_size!r}): tau = {tau!r} "
-                      f"from E = {self.E!r}, dE = {self.dE!r}; theta and w_hat keep their values at t; "
+                      f"from E = {self.modified!r}; theta and w_hat keep their values at t; "
                       "the inputs are out of range or the closed loop diverged")
-        self.theta1, self.theta2, self.theta3, self.theta4, self.w_hat = theta1, theta2, theta3, theta4, w_hat
+        self.theta = theta
+        if self._default_shape:  # n = 2, m = 2 unrolled: the per-step path
+            self.theta1, self.theta2, self.theta3, self.theta4 = theta
+        else:
+            self.__dict__.update(zip(self._theta_outputs, theta))
+        self.w_hat = w_hat
         if chatter_monitor.update(self.chatter, self.u, step_size):
             self.warn(chatter_monitor.warning(self.chatter, step_size))
         return True

@@ -13,7 +13,23 @@ From that table this module derives
 The per-step path (``set_real``, ``get_real``, ``do_step``) is written for
 speed: value references index plain lists, values live in the instance
 ``__dict__`` and outputs are recomputed lazily, once after their inputs or
-the state changed.  A model subclass implements only
+the state changed.
+
+FMI's rules of the calling sequence are kept (as the Modelica Reference-FMUs
+keep them), each refusal logged with the call, the variable or time and the rule:
+
+* every parameter has variability ``fixed``: it can be set after instantiation
+  and in initialisation mode only; in step mode only inputs can be set, and after
+  fmi2Terminate nothing (``fmi2SetReal``/``fmi2SetInteger`` fail);
+* ``fmi2DoStep`` only between fmi2ExitInitializationMode and fmi2Terminate, with
+  ``currentCommunicationPoint`` equal to the FMU's own time (where the last step
+  ended, or the time of a state restored by fmi2SetFMUstate) and a step >= 0.
+
+Statuses: pythonfmu 0.7 reports every Python exception as ``fmi2Fatal`` (never
+``fmi2Error``), so a refused write is ``fmi2Fatal`` (see
+:func:`_outlive_pythonfmu_cleanup`: the host can still free the instance); a
+refused doStep returns False, which pythonfmu reports as ``fmi2Discard``: the
+FMU's state and time are unchanged and the host may go on correctly.  A model subclass implements only
 
 * ``initialize(start_time)``   state at the end of initialisation,
 * ``compute_outputs()``        outputs from state and inputs, no side effect
@@ -213,6 +229,8 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         self.start_time = 0.0
         self.time = 0.0
         self.initialized = False
+        self.terminated = False
+        self.stepping = False  # between fmi2ExitInitializationMode and fmi2Terminate
         self.outputs_stale = True
         # Setting an input makes the outputs stale only where some output depends on an
         # input directly (and always before initialisation, when parameters are set).
@@ -223,8 +241,12 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
             raise ValueError(f"{type(self).__name__}: duplicate variable names in table")
         # value reference -> attribute name, for the lean set/get path
         self._names_by_vr = names
-        self._settable = [v.causality != OUTPUT for v in self.VARIABLES]
+        # what fmi2SetReal/fmi2SetInteger accept now: parameters and inputs until
+        # initialisation ends, then inputs only (every parameter is fixed), then nothing
+        self._settable_before_step = [v.causality != OUTPUT for v in self.VARIABLES]
         self._inputs = [v.causality == INPUT for v in self.VARIABLES]
+        self._nothing_settable = [False] * len(self.VARIABLES)
+        self._settable = self._settable_before_step
         for v in self.VARIABLES:
             setattr(self, v.name, int(v.start) if v.kind == "Integer" else float(v.start))
             self._register(v)
@@ -293,8 +315,15 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         self.time = self.start_time
         self.initialize(self.start_time)
         self.initialized = True
-        self.stale_on_set = self._feedthrough
+        self._enter_mode()
         self.outputs_stale = True
+
+    def _enter_mode(self):
+        """Set what may be set and whether doStep may run, from ``initialized`` and ``terminated``."""
+        self.stepping = self.initialized and not self.terminated
+        self._settable = (self._nothing_settable if self.terminated else
+                          self._inputs if self.initialized else self._settable_before_step)
+        self.stale_on_set = self._feedthrough or not self.initialized
 
     @_fmi_entry
     def enter_initialization_mode(self):
@@ -302,7 +331,8 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
 
     @_fmi_entry
     def terminate(self):
-        pass
+        self.terminated = True
+        self._enter_mode()
 
     def fail(self, message: str):
         """Log ``message`` as an error for the host and abort the FMI call."""
@@ -321,9 +351,10 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         _outlive_pythonfmu_cleanup(self)
 
     def do_step(self, current_time, step_size):
+        time = self.time  # a step starts at the FMU's time, give or take rounding (1e-9 relative)
+        if not (self.stepping and step_size >= 0.0 and abs(current_time - time) <= 1e-9 * (abs(time) + step_size)):
+            return self._refuse_step(current_time, step_size)
         try:
-            if not step_size >= 0.0:
-                self.fail(f"doStep with communication step {step_size!r}; it must be >= 0")
             if self.outputs_stale:
                 self.compute_outputs()
             ok = self.step(current_time, step_size)
@@ -333,6 +364,23 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         self.time = current_time + step_size
         self.outputs_stale = True
         return ok is not False
+
+    def _refuse_step(self, current_time, step_size) -> bool:
+        """Log why this doStep breaks FMI's rules; False: pythonfmu returns fmi2Discard, nothing changed."""
+        call = f"fmi2DoStep(currentCommunicationPoint = {current_time!r}, communicationStepSize = {step_size!r})"
+        if self.terminated:
+            rule = ("the FMU was terminated (fmi2Terminate); doStep is allowed only between "
+                    "fmi2ExitInitializationMode and fmi2Terminate")
+        elif not self.initialized:
+            rule = ("the FMU is not initialised: call fmi2ExitInitializationMode first; doStep is allowed only "
+                    "between fmi2ExitInitializationMode and fmi2Terminate")
+        elif not step_size >= 0.0:
+            rule = "the communication step must be >= 0"
+        else:
+            rule = (f"expected currentCommunicationPoint = {self.time!r}, the FMU's time (where the last step "
+                    "ended, or the time of the state restored by fmi2SetFMUstate); a step must start there")
+        self.log(f"{self.instance_name}: {call} refused: {rule}; state and time unchanged", Fmi2Status.error)
+        return False
 
     def _parameter_errors(self) -> list:
         table = [v.check(getattr(self, v.name)) for v in self.VARIABLES if v.causality == PARAMETER]
@@ -384,10 +432,17 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         self.initialize(self.start_time)
         self.compute_outputs()
 
-    def _reject(self, vr, value):
+    def _reject(self, vr, value, call="fmi2SetReal"):
         variable = self.VARIABLES[vr]
         if variable.causality == OUTPUT:
-            self.fail(f"{variable.name} is an output and cannot be set")
+            self.fail(f"{variable.name} is an output and cannot be set")  # the C edition's words too
+        if self.terminated:
+            self.fail(f"{call}: {variable.name} = {value!r} refused: the FMU was terminated (fmi2Terminate); "
+                      "no variable can be set after fmi2Terminate")
+        if variable.causality == PARAMETER and self.initialized:
+            self.fail(f"{call}: {variable.name} = {value!r} refused at t = {self.time!r}: {variable.name} is a "
+                      "parameter of variability fixed, which can be set only before fmi2ExitInitializationMode "
+                      f"(it keeps {getattr(self, variable.name)!r}); in step mode only inputs can be set")
         if variable.causality == PARAMETER:
             self.fail(variable.check(value))
         self.fail(f"input {variable.name} = {value!r} is not finite")
@@ -410,7 +465,7 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
     def set_integer(self, vrs, values):
         for vr, value in zip(vrs, values):
             if not self._settable[vr]:
-                self._reject(vr, value)
+                self._reject(vr, value, "fmi2SetInteger")
             setattr(self, self._names_by_vr[vr], int(value))
         self.outputs_stale = True
 
@@ -434,7 +489,7 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         attributes = self.__dict__
         for name in self._state_names():
             attributes[name] = _copy(state[name])
-        self.stale_on_set = self._feedthrough or not self.initialized
+        self._enter_mode()
         self.outputs_stale = True
 
     @staticmethod

@@ -9,18 +9,23 @@ On the same ``pendulum_case1``/``vud`` system at the same step:
 5. the in-process oracle (the same math, no FMI);
 6. the native edition (C FMUs, docs/native.md): our master with them, and libcosim
    (libcosimpy) with either edition and no worker threads, on the same exported SSP;
-each with its ratio to ours.  Speed targets live here, not in timed tests.
+each with its ratio to ours; and 7. each FMU alone (plant, reference, controller: the
+master's raw calls on that one instance) next to its null twin, which shows where the
+time of a step goes and what each FMU's Python adds to the FMI floor.  Speed targets live
+here, not in timed tests.
 """
 from __future__ import annotations
 
+import functools
 import json
+import math
 import tempfile
 import time as clock
 from pathlib import Path
 
 from . import scenario as scenarios
 from .fmi import Component, ModelInfo
-from .master import Master
+from .master import Master, resolve_fmu
 from .oracle import simulate_oracle
 
 NULL_FMUS = {  # instance -> (model identifier, the FMU whose variables it copies)
@@ -60,19 +65,23 @@ def build_null_fmus(folder: Path) -> dict:
     return paths
 
 
+def _raw_calls(scenario, name: str, path) -> tuple:
+    """(component, get_reals, set_reals, do_step, inputs array) of one initialised instance, as the master calls it."""
+    component = Component(name, ModelInfo.read(path)).instantiate()
+    component.setup(scenario.start, scenario.stop)
+    component.exit_initialization()
+    inputs = [c.target_variable for c in scenario.connections if c.target_instance == name]
+    outputs = list(dict.fromkeys(
+        [c.source_variable for c in scenario.connections if c.source_instance == name]
+        + [d.split(".", 1)[1] for d in scenario.record if d.startswith(name + ".")]))
+    values, set_reals = component.real_writer(inputs)
+    return component, component.real_reader(outputs)[1], set_reals, component.stepper(), values
+
+
 def floor_us_per_step(scenario, null_paths: dict) -> float:
     """A bare loop: per FMU and step one raw getReal, setReal and doStep, nothing else."""
-    components, calls = [], []
-    for name in ("plant", "reference", "controller"):
-        component = Component(name, ModelInfo.read(null_paths[name])).instantiate()
-        component.setup(scenario.start, scenario.stop)
-        component.exit_initialization()
-        inputs = [c.target_variable for c in scenario.connections if c.target_instance == name]
-        outputs = list(dict.fromkeys(
-            [c.source_variable for c in scenario.connections if c.source_instance == name]
-            + [d.split(".", 1)[1] for d in scenario.record if d.startswith(name + ".")]))
-        components.append(component)
-        calls.append((component.real_reader(outputs)[1], component.real_writer(inputs)[1], component.stepper()))
+    opened = [_raw_calls(scenario, name, null_paths[name]) for name in ("plant", "reference", "controller")]
+    calls = [(get_reals, set_reals, do_step) for _, get_reals, set_reals, do_step, _ in opened]
     steps, step = scenario.steps, scenario.step
     started = clock.perf_counter()
     for n in range(steps):
@@ -82,9 +91,29 @@ def floor_us_per_step(scenario, null_paths: dict) -> float:
             set_reals()
             do_step(t, step, 1)
     elapsed = clock.perf_counter() - started
-    for component in components:
+    for component, *_ in opened:
         component.free()
     return 1e6 * elapsed / steps
+
+
+def fmu_us_per_step(scenario, name: str, path) -> float:
+    """One FMU alone (the master's raw getReal, setReal, doStep) with inputs 0.1 sin t: its cost per step."""
+    component, get_reals, set_reals, do_step, inputs = _raw_calls(scenario, name, path)
+    count = len(inputs)
+    steps, step = scenario.steps, scenario.step
+    try:
+        started = clock.perf_counter()
+        for n in range(steps):
+            t = n * step
+            get_reals()
+            value = 0.1 * math.sin(t)
+            for k in range(count):
+                inputs[k] = value
+            set_reals()
+            do_step(t, step, 1)
+        return 1e6 * (clock.perf_counter() - started) / steps
+    finally:
+        component.free()
 
 
 def master_us_per_step(scenario, algorithm: str, fmu_paths: dict | None = None,
@@ -150,15 +179,16 @@ def ecos_us_per_step(package: Path, scenario) -> tuple[float, float]:
     ecospy = engines.import_ecospy()
     ecospy.EcosLib.set_log_level("warn")
     started = clock.perf_counter()
-    simulation = ecospy.EcosSimulation(ssp_path=str(package), step_size=scenario.step)
-    try:
-        simulation.init(start_time=scenario.start, parameter_set=engines.read_package(package).parameter_set)
-        loop_start = clock.perf_counter()
-        simulation.step(scenario.steps)
-        loop = clock.perf_counter() - loop_start
-        simulation.terminate()
-    finally:
-        simulation.free()
+    with engines.ecos_temp_dir():
+        simulation = ecospy.EcosSimulation(ssp_path=str(package), step_size=scenario.step)
+        try:
+            simulation.init(start_time=scenario.start, parameter_set=engines.read_package(package).parameter_set)
+            loop_start = clock.perf_counter()
+            simulation.step(scenario.steps)
+            loop = clock.perf_counter() - loop_start
+            simulation.terminate()
+        finally:
+            simulation.free()
     whole = clock.perf_counter() - started
     return 1e6 * loop / scenario.steps, 1e6 * whole / scenario.steps
 
@@ -211,6 +241,9 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
         python_paths = build_fmu.ensure_built(edition="python")
         package = ssp.export_ssp(scenario, folder / f"{scenario.name}.ssp", fmu_paths=python_paths)
         null_paths = build_null_fmus(folder)
+        real_paths = {name: resolve_fmu(spec.fmu, scenario, python_paths) for name, spec in scenario.components.items()}
+        per_fmu = {f"fmu_{name}{kind}": functools.partial(fmu_us_per_step, scenario, name, paths[name])
+                   for name in NULL_FMUS for kind, paths in (("", real_paths), ("_null", null_paths))}
         native = native_paths()
         from .libcosim_engine import with_algorithm
         libcosim_python = with_algorithm(package, folder / "libcosim_python", scenario.step, workers=0)
@@ -233,6 +266,7 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
             "floor": lambda: floor_us_per_step(scenario, null_paths),
             "oracle": lambda: oracle_us_per_step(scenario, runs),
             **measurements,
+            **per_fmu,
         }, repeat)
     ours, ours_whole = figures["ours_feedthrough_us"], figures["ours_feedthrough_whole_us"]
     figures["real_time_factor"] = scenario.step / (ours * 1e-6)
@@ -281,6 +315,11 @@ def bench_command(args) -> int:
     if native:
         print(f"  target: native FMUs in our master <= 8 us/step: {native:.2f}; "
               f"in libcosim (0 workers) <= 2 us/step: {libcosim:.2f}" if libcosim else "")
+    print(f"  {'one FMU alone, us per step':36s} {'FMU':>9s} {'null FMU':>9s} {'difference':>10s}")
+    for name in NULL_FMUS:
+        own, null = figures.get(f"fmu_{name}_us"), figures.get(f"fmu_{name}_null_us")
+        if own is not None and null is not None:
+            print(f"  {name:36s} {own:9.2f} {null:9.2f} {own - null:10.2f}")
     fmpy_whole = figures.get("fmpy_ssp_whole_us")
     if fmpy_whole:
         print(f"  target: ours at least 2x faster than fmpy's SSP simulator (whole runs): "
@@ -289,12 +328,14 @@ def bench_command(args) -> int:
 
 
 def register(commands):
+    from . import cli_args
+
     parser = commands.add_parser("bench", help="cost per step: ours vs fmpy SSP, Ecos, the FMI floor, the oracle")
-    parser.add_argument("--scenario", default="pendulum_case1")
+    parser.add_argument("--scenario", default="pendulum_case1", type=cli_args.scenario, help=cli_args.scenario_help())
     parser.add_argument("--controller", default="vud", choices=tuple(scenarios.CONTROLLER_VARIANTS))
-    parser.add_argument("--stop", type=float, default=2.0, help="simulated seconds per measurement")
-    parser.add_argument("--step", type=float, help="communication step (default: the scenario's)")
-    parser.add_argument("--repeat", type=int, default=3, help="measurements per figure; the best counts")
+    parser.add_argument("--stop", type=cli_args.positive_float, default=2.0, help="simulated seconds per measurement")
+    parser.add_argument("--step", type=cli_args.positive_float, help="communication step (default: the scenario's)")
+    parser.add_argument("--repeat", type=cli_args.positive_int, default=3, help="measurements per figure; the best counts")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.set_defaults(handler=bench_command)
 

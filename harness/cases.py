@@ -1,55 +1,155 @@
-"""Run many co-simulations in parallel processes: one case = scenario x controller x settings."""
+"""One case model and one runner for every study: tables, regression, sweeps, the step study.
+
+A :class:`Case` is one co-simulation: a scenario x a controller x settings (step, stop,
+master algorithm, parameter overrides, FMU files) and what to bring back besides the
+scores (signals thinned to an interval, or resampled to a number of points).
+:func:`run_case` runs it and returns its *outcome*: a plain dict (it travels between
+processes and into CSV/JSON files) with the scores of SPEC section 7 and a status:
+
+* ``ok``: the run completed; every score is there;
+* ``diverged``: the master's divergence bound stopped it, or a plant FMU reported that
+  its state diverged inside doStep;
+* ``failed``: any other failure (an FMU rejected a parameter, a call failed, ...).
+
+A diverged or failed run is an outcome with its ``reason`` on one line, never an
+exception: a study of many cases goes on.  :func:`run_cases` runs many on a process pool.
+"""
 from __future__ import annotations
 
 import functools
 import multiprocessing
 import os
 import sys
+import time as clock
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import scenario as scenarios
-from .master import Divergence, SimulationFailed, simulate
-from .scores import score_run
 
 FIGURE_SIGNALS = ("plant.y", "plant.dy", "reference.ym", "reference.dym", "reference.e", "reference.de",
                   "controller.u")
+STATUSES = ("ok", "diverged", "failed")
+REASON_LIMIT = 600  # characters of a failure's reason (one line)
 
 
 @dataclass(frozen=True)
 class Case:
-    scenario: str
+    """One co-simulation.  ``scenario``: a name, a .toml path or a :class:`~harness.scenario.Scenario`."""
+
+    scenario: object
     controller: str
     step: float | None = None  # None: the scenario's step
     stop: float | None = None  # None: the scenario's stop time
     algorithm: str = "feedthrough"
-    overrides: tuple = field(default=())  # (("plant.mp", 1.0), ...)
-    figure_interval: float | None = None  # return signals thinned to this interval (figures)
+    overrides: tuple = field(default=())  # (("plant.mp", 1.0), ("step", 1e-3), ...), applied last
+    figure_interval: float | None = None  # bring back ``signals`` thinned to this interval (figures)
+    points: int | None = None  # bring back ``signals`` resampled to this many points over [start, stop]
+    signals: tuple = FIGURE_SIGNALS  # the signals brought back (with figure_interval or points)
+    fmu_files: tuple = field(default=())  # (("plant", "/path/InvertedPendulum.fmu"), ...): FMU of an instance
+
+    @property
+    def scenario_name(self) -> str:
+        return self.scenario.name if isinstance(self.scenario, scenarios.Scenario) else str(self.scenario)
+
+    @property
+    def name(self) -> str:
+        """``scenario_controller`` (the regression's reference files are named after it)."""
+        return f"{self.scenario_name}_{self.controller}"
+
+    @property
+    def label(self) -> str:
+        """The name and every setting that differs from the scenario's."""
+        settings = [f"{key}={value:g}" for key, value in (("step", self.step), ("stop", self.stop))
+                    if value is not None]
+        settings += [f"{k}={v:g}" for k, v in self.overrides]
+        if self.algorithm != "feedthrough":
+            settings.append(self.algorithm)
+        return self.name + (" [" + ", ".join(settings) + "]" if settings else "")
 
     def build(self) -> scenarios.Scenario:
-        return scenarios.configure(self.scenario, self.controller, self.step, self.stop, self.overrides)
+        """The scenario with the controller, step, stop, overrides and FMU files set.
+
+        The run covers a whole number of steps.  A case that varies the step (``step``, or
+        a ``step`` override: the step study, sweeps over the step) moves a stop off its
+        step grid to the nearest whole number of steps, and the outcome's ``notes`` say
+        so; otherwise a given stop off the step grid is an error (ScenarioError).
+        """
+        varies_step = self.step is not None or any(name == "step" for name, _ in self.overrides)
+        scenario = scenarios.configure(self.scenario, self.controller, self.step, self.stop, self.overrides,
+                                       fit_stop="move" if varies_step else "error")
+        for instance, path in self.fmu_files:
+            scenario.components[instance].fmu = str(path)
+        return scenario
+
+
+def one_line(text: str, limit: int = REASON_LIMIT) -> str:
+    line = " | ".join(part.strip() for part in str(text).splitlines() if part.strip())
+    return line if len(line) <= limit else line[:limit - 3] + "..."
+
+
+def status_of(error: BaseException) -> str:
+    """``diverged`` or ``failed`` for the exception that stopped a run."""
+    from .fmi import FmiError
+    from .master import Divergence
+
+    cause = getattr(error, "cause", error)
+    if isinstance(cause, Divergence):
+        return "diverged"
+    # the plant FMUs stop a run themselves when their state blows up inside doStep
+    if isinstance(cause, FmiError) and any("state diverged" in line for line in cause.log):
+        return "diverged"
+    return "failed"
+
+
+def resample(time: np.ndarray, values: np.ndarray, start: float, stop: float, points: int) -> tuple:
+    """(grid, values) on ``points`` evenly spaced times over [start, stop]; NaN after the run stopped."""
+    grid = np.linspace(start, stop, points)
+    if len(time) == 0:
+        return grid, np.full(points, np.nan)
+    inside = grid <= time[-1] + 1e-12
+    resampled = np.full(points, np.nan)
+    resampled[inside] = np.interp(grid[inside], time, values)
+    return grid, resampled
 
 
 def run_case(case: Case, fmu_paths: dict | None = None) -> dict:
-    """Scores of one case; a diverged or failed run is a row with its reason, not an exception."""
+    """The outcome of one case (see the module's doc); never raises for a failing simulation."""
+    from .master import SimulationFailed, simulate
+    from .scores import score_run
+
     scenario = case.build()
-    outcome = {"scenario": case.scenario, "controller": case.controller, "step": scenario.step,
-               "algorithm": case.algorithm}
+    outcome = {"scenario": case.scenario_name, "controller": case.controller, "step": scenario.step,
+               "start": scenario.start, "stop": scenario.stop, "algorithm": case.algorithm,
+               "notes": list(scenario.notes)}
+    wall = clock.perf_counter()
+    result = None
     try:
         result = simulate(scenario, algorithm=case.algorithm, fmu_paths=fmu_paths)
-    except SimulationFailed as failure:
-        status = "diverged" if isinstance(failure.cause, Divergence) else "failed"
-        outcome.update(status=status, reason=str(failure).splitlines()[0],
-                       wall_s=failure.result.wall_s, rows=failure.result.rows)
-        return outcome
-    outcome.update(status="ok", reason="", **score_run(result), wall_s=result.wall_s,
-                   us_per_step=result.us_per_step, rows=result.rows)
-    if case.figure_interval:
+        outcome.update(status="ok", reason="", **score_run(result), us_per_step=result.us_per_step)
+    except Exception as error:  # noqa: BLE001 - every failure of a case is an outcome, the study goes on
+        if isinstance(error, SimulationFailed):
+            result = error.result
+        message = str(error) or type(error).__name__
+        if not isinstance(error, SimulationFailed):
+            message = f"{type(error).__name__}: {message}"
+        outcome.update(status=status_of(error), reason=one_line(message))
+    outcome["wall_s"] = clock.perf_counter() - wall
+    outcome["rows"] = result.rows if result is not None else 0
+    if case.points and result is not None:
+        signals, grid = {}, None
+        for name in case.signals:
+            grid, signals[name] = resample(result.time, result.signal(name), scenario.start, scenario.stop,
+                                           case.points)
+        outcome.update(time=grid, signals=signals)
+    elif case.points:
+        grid = np.linspace(scenario.start, scenario.stop, case.points)
+        outcome.update(time=grid, signals={name: np.full(case.points, np.nan) for name in case.signals})
+    elif case.figure_interval and result is not None and outcome["status"] == "ok":
         every = max(1, round(case.figure_interval / scenario.step))
         outcome["signals"] = {"time": result.time[::every],
-                              **{name: result.signal(name)[::every] for name in FIGURE_SIGNALS}}
+                              **{name: result.signal(name)[::every] for name in case.signals}}
     return outcome
 
 
@@ -84,11 +184,14 @@ def parallel_map(function, items: list, jobs: int | None = None, description: st
 
 
 def run_cases(cases: list, jobs: int | None = None, description: str = "co-simulations",
-              progress: bool | None = None) -> list:
+              progress: bool | None = None, fmu_paths: dict | None = None) -> list:
     """Outcomes of ``cases`` in their order, computed on ``jobs`` processes with one progress bar."""
-    import build_fmu
+    for case in cases:  # a mistake in a case (a stop off the step grid, ...) is one error before any run
+        case.build()
+    if fmu_paths is None:
+        import build_fmu
 
-    fmu_paths = build_fmu.ensure_built()  # once, before the workers start
+        fmu_paths = build_fmu.ensure_built()  # once, before the workers start
     return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths), cases, jobs, description, progress)
 
 
@@ -96,4 +199,4 @@ def as_float(value) -> float:
     return float(value) if value is not None else float("nan")
 
 
-__all__ = ["Case", "run_case", "run_cases", "default_jobs", "np"]
+__all__ = ["Case", "run_case", "run_cases", "parallel_map", "default_jobs", "status_of", "one_line", "resample"]

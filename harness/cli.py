@@ -5,6 +5,7 @@ import argparse
 import json
 import sys
 
+from . import cli_args
 from . import scenario as scenarios
 from .master import ALGORITHMS, SimulationFailed, simulate
 from .scores import SCORE_KEYS, score_run
@@ -25,6 +26,7 @@ def _progress_bar(total: int, description: str, enabled: bool):
 
 def run_command(args) -> int:
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
+    cli_args.check_output_interval(args.output_interval, scenario.step)
     if scenario.path is not None and scenario.path.parent == scenarios.SCENARIO_DIR:  # one the study covers
         from .step_study import step_warning
 
@@ -33,15 +35,16 @@ def run_command(args) -> int:
             print(warning, file=sys.stderr)
     progress, close = _progress_bar(scenario.steps, f"{scenario.name}/{args.controller}",
                                     enabled=not args.json and sys.stderr.isatty())
+    for note in scenario.notes:  # e.g. the stop moved to a whole number of steps
+        print(f"note: {note}", file=sys.stderr)
     try:
         result = simulate(scenario, algorithm=args.algorithm, progress=progress)
     except SimulationFailed as failure:
         close()
         if args.out:
             failure.result.write_csv(args.out, args.output_interval)
-            print(f"partial result ({failure.result.rows} rows) written to {args.out}", file=sys.stderr)
-        print(f"error: {failure}", file=sys.stderr)
-        return 2
+            print(f"partial result ({failure.result.rows} rows) written to {args.out}")
+        return cli_args.report(failure)
     close()
     if args.out:
         result.write_csv(args.out, args.output_interval)
@@ -49,12 +52,16 @@ def run_command(args) -> int:
     summary = {"scenario": scenario.name, "controller": args.controller, "step": scenario.step,
                **scores, "wall_s": result.wall_s, "us_per_step": result.us_per_step}
     if args.json:
+        if cli_args.short_horizon_note(scenario):
+            summary["warnings"] = [f"es1_pct, es2_pct{cli_args.short_horizon_note(scenario)}"]
         print(json.dumps(summary))
     else:
         print(f"{scenario.name} / {args.controller} ({args.algorithm}), step {scenario.step:g} s, "
               f"{result.rows - 1} steps in {result.wall_s:.2f} s ({result.us_per_step:.1f} us/step)")
+        short = cli_args.short_horizon_note(scenario)
         for key in SCORE_KEYS:
-            print(f"  {key:8s} {scores[key]:.6g}")
+            note = short if key in cli_args.PERIOD_SCORES and short else ""
+            print(f"  {key:8s} {'n/a' if note else format(scores[key], '.6g')}{note}")
         if args.out:
             print(f"  result   {args.out}")
     return 0
@@ -62,15 +69,16 @@ def run_command(args) -> int:
 
 def register_run(commands):
     run = commands.add_parser("run", help="run one scenario with one controller and score it")
-    run.add_argument("scenario", help=f"scenario name ({', '.join(scenarios.scenario_names())}) or .toml path")
+    run.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
     run.add_argument("--controller", choices=tuple(scenarios.CONTROLLER_VARIANTS), default="vud")
-    run.add_argument("--step", type=float, help="communication step in s (default: the scenario's)")
-    run.add_argument("--stop", type=float, help="stop time in s (default: the scenario's)")
+    run.add_argument("--step", type=cli_args.positive_float, help="communication step in s (default: the scenario's)")
+    run.add_argument("--stop", type=cli_args.positive_float, help="stop time in s (default: the scenario's)")
     run.add_argument("--algorithm", choices=ALGORITHMS, default="feedthrough",
                      help="feedthrough: no delay along direct-feedthrough chains (default); "
                           "jacobi: every connection delayed one step")
     run.add_argument("--out", help="write the result CSV here")
-    run.add_argument("--output-interval", type=float, help="thin the CSV to this interval (scores use every step)")
+    run.add_argument("--output-interval", type=cli_args.positive_float,
+                     help="thin the CSV to this interval, a multiple of the step (scores use every step)")
     run.add_argument("--json", action="store_true", help="print one JSON object with the scores")
     run.set_defaults(handler=run_command)
 
@@ -84,8 +92,8 @@ def _subcommand_registrations():
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m harness",
-                                     description="Co-simulation of the adaptive fuzzy controller FMUs")
+    parser = cli_args.OneLineParser(prog="python -m harness",
+                                    description="Co-simulation of the adaptive fuzzy controller FMUs")
     commands = parser.add_subparsers(dest="command", required=True)
     for register in _subcommand_registrations():
         register(commands)
@@ -122,21 +130,20 @@ def apply_edition(args):
 
 
 def main(argv=None) -> int:
+    """Run one subcommand; any error becomes one line on stderr (exit 2: usage, 1: the run failed)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as done:  # a usage error (one line already printed) or --help
+        return done.code if isinstance(done.code, int) else cli_args.USAGE_EXIT
     undo = apply_edition(args)
     try:
         return args.handler(args)
-    except scenarios.ScenarioError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    except FileNotFoundError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    except RuntimeError as error:
-        if type(error).__name__ != "NativeBuildError":
-            raise
-        print(f"error: {error}", file=sys.stderr)
-        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+    except Exception as error:  # noqa: BLE001 - the last resort: no traceback reaches a user
+        status = cli_args.report(error)
+        return cli_args.USAGE_EXIT if type(error).__name__ == "NativeBuildError" else status
     finally:
         undo()

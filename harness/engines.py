@@ -56,8 +56,11 @@ Ecos (ecospy 0.7)
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import functools
+import os
+import sys
 import time as clock
 import xml.etree.ElementTree as ElementTree
 import zipfile
@@ -159,13 +162,15 @@ def read_package(path) -> Package:
 
 
 def _experiment(package: Package, stop, step) -> tuple[float, float, float, int]:
+    from .cli_args import UsageError  # a ValueError: an experiment the package cannot run
+
     stop = package.stop if stop is None else float(stop)
     step = package.step if step is None else float(step)
     if stop is None or step is None:
-        raise ValueError(f"{package.path.name}: give stop and step (the package has no default for them)")
+        raise UsageError(f"{package.path.name}: give --stop and --step (the package has no default for them)")
     steps = round((stop - package.start) / step)
     if steps < 1:
-        raise ValueError(f"stop - start = {stop - package.start} is shorter than one step {step}")
+        raise UsageError(f"stop - start = {stop - package.start} is shorter than one step {step}")
     return package.start, stop, step, steps
 
 
@@ -238,6 +243,31 @@ def import_ecospy():
     return ecospy
 
 
+@contextlib.contextmanager
+def ecos_temp_dir():
+    """A private temporary folder for one Ecos run, removed afterwards with all it holds.
+
+    Ecos unpacks the SSP and every FMU into ``ecos_*`` folders of the temporary
+    directory (``TMPDIR``) and leaves them there (about 20 MB a run).  TMPDIR points
+    at a folder of our own while the simulation lives; then it is restored and the
+    folder removed, so nothing is left and no other process's folders are touched.
+    """
+    import shutil
+    import tempfile
+
+    folder = tempfile.mkdtemp(prefix="afc_ecos_")
+    previous = os.environ.get("TMPDIR")
+    os.environ["TMPDIR"] = folder
+    try:
+        yield folder
+    finally:
+        if previous is None:
+            os.environ.pop("TMPDIR", None)
+        else:
+            os.environ["TMPDIR"] = previous
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def run_ecos(ssp_path, stop: float | None = None, step: float | None = None, variables=None,
              parameter_set: str | None = "package", log_level: str = "warn") -> EngineResult:
     """Run the package in Ecos; values read with get_real after init and after every step.
@@ -256,22 +286,23 @@ def run_ecos(ssp_path, stop: float | None = None, step: float | None = None, var
     values = np.empty((steps + 1, len(columns)))
     raw_time = np.empty(steps + 1)
     wall = clock.perf_counter()
-    simulation = ecospy.EcosSimulation(ssp_path=str(ssp_path), step_size=step)
-    try:
-        if parameter_set is None:
-            simulation.init(start_time=start)
-        else:
-            simulation.init(start_time=start, parameter_set=parameter_set)
-        get_real = simulation.get_real
-        for k in range(steps + 1):
-            if k:
-                raw_time[k] = simulation.step(1)
+    with ecos_temp_dir():
+        simulation = ecospy.EcosSimulation(ssp_path=str(ssp_path), step_size=step)
+        try:
+            if parameter_set is None:
+                simulation.init(start_time=start)
             else:
-                raw_time[k] = simulation.get_time()
-            values[k] = [get_real(identifier) for identifier in identifiers]
-        simulation.terminate()
-    finally:
-        simulation.free()
+                simulation.init(start_time=start, parameter_set=parameter_set)
+            get_real = simulation.get_real
+            for k in range(steps + 1):
+                if k:
+                    raw_time[k] = simulation.step(1)
+                else:
+                    raw_time[k] = simulation.get_time()
+                values[k] = [get_real(identifier) for identifier in identifiers]
+            simulation.terminate()
+        finally:
+            simulation.free()
     wall = clock.perf_counter() - wall
     time = start + np.arange(steps + 1) * step
     return EngineResult("ecos", time, columns, values, wall, raw_time=raw_time,
@@ -406,6 +437,8 @@ def compare_command(args) -> int:
     from . import scenario as scenarios
 
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
+    for note in scenario.notes:
+        print(f"note: {note}", file=sys.stderr)
     with tempfile.TemporaryDirectory(prefix="afc_engines_") as directory:
         results = run_all(scenario, directory, workers=args.workers)
     start = scenario.start + args.skip_steps * scenario.step if args.skip_steps else None
@@ -445,20 +478,22 @@ def run_ssp_command(args) -> int:
 
 
 def register(commands):
+    from . import cli_args
+
     run = commands.add_parser("run-ssp", help="run an exported SSP package in fmpy's SSP simulator or in Ecos")
-    run.add_argument("ssp", help="the .ssp file (python -m harness export-ssp ...)")
+    run.add_argument("ssp", type=cli_args.ssp_file, help="the .ssp file (python -m harness export-ssp ...)")
     run.add_argument("--engine", choices=("ecos", "fmpy"), default="ecos")
-    run.add_argument("--stop", type=float, help="stop time (default: the package's DefaultExperiment)")
-    run.add_argument("--step", type=float, help="communication step (default: the package's)")
+    run.add_argument("--stop", type=cli_args.positive_float, help="stop time (default: the package's DefaultExperiment)")
+    run.add_argument("--step", type=cli_args.positive_float, help="communication step (default: the package's)")
     run.add_argument("--out", help="write the result CSV here (time = the time the values belong to)")
     run.set_defaults(handler=run_ssp_command)
     compare = commands.add_parser("compare-engines", help="export a scenario and run it in our master (feedthrough, "
                                                           "jacobi), Ecos and fmpy's SSP simulator, side by side")
-    compare.add_argument("scenario")
+    compare.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
     compare.add_argument("--controller", choices=("vud", "fixed", "fae"), default="vud")
-    compare.add_argument("--stop", type=float, default=2.0, help="stop time (default 2 s)")
-    compare.add_argument("--step", type=float, help="communication step (default: the scenario's)")
-    compare.add_argument("--skip-steps", type=int, default=0,
+    compare.add_argument("--stop", type=cli_args.positive_float, default=2.0, help="stop time (default 2 s)")
+    compare.add_argument("--step", type=cli_args.positive_float, help="communication step (default: the scenario's)")
+    compare.add_argument("--skip-steps", type=cli_args.non_negative_int, default=0,
                          help="compare from t = start + N steps (fmpy's start transient lasts 2 steps)")
-    compare.add_argument("--workers", type=int, help="processes (default: every core)")
+    compare.add_argument("--workers", type=cli_args.positive_int, help="processes (default: every core)")
     compare.set_defaults(handler=compare_command)

@@ -91,9 +91,20 @@ class Component:
         return self.info.fmi_version.startswith("3")
 
     def instantiate(self, logging_on: bool = False):
-        self.unzip_dir = extract(str(self.info.path), tempfile.mkdtemp(prefix=f"afc_{self.name}_"))
-        if self.fmi3:
-            return self._instantiate3(logging_on)
+        """Extract and instantiate; on failure the extraction is removed before the error propagates."""
+        self.unzip_dir = tempfile.mkdtemp(prefix=f"afc_{self.name}_")
+        try:
+            extract(str(self.info.path), self.unzip_dir)
+            if self.fmi3:
+                self._instantiate3(logging_on)
+            else:
+                self._instantiate2(logging_on)
+        except BaseException:
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            raise
+        return self
+
+    def _instantiate2(self, logging_on: bool):
         self.slave = self._call("loading the FMU's shared library", lambda: FMU2Slave(
             guid=self.info.guid, unzipDirectory=self.unzip_dir,
             modelIdentifier=self.info.model_identifier, instanceName=self.name))
@@ -108,7 +119,6 @@ class Component:
         self._raw_get_real = functions["fmi2GetReal"]
         self._raw_do_step = functions["fmi2DoStep"]
         self._component = self.slave.component
-        return self
 
     def _instantiate3(self, logging_on: bool):
         """FMI 3.0 co-simulation through fmpy's FMU3Slave; the same per-step interface."""

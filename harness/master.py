@@ -112,6 +112,10 @@ def _names(info: ModelInfo, causality: str) -> str:
     return ", ".join(v.name for v in info.variables.values() if v.causality == causality)
 
 
+def _article(word: str) -> str:
+    return "an" if word[:1] in "aeiou" else "a"
+
+
 def _check_variable(dotted: str, infos: dict, causality: str, role: str):
     instance, _, variable = dotted.partition(".")
     if instance not in infos:
@@ -122,7 +126,8 @@ def _check_variable(dotted: str, infos: dict, causality: str, role: str):
         raise ScenarioError(f"{role} {dotted!r}: {instance} has no variable {variable!r}; "
                             f"valid {causality}s: {_names(info, causality)}")
     if found.causality != causality:
-        raise ScenarioError(f"{role} {dotted!r} is a {found.causality}, not an {causality}; "
+        raise ScenarioError(f"{role} {dotted!r} is {_article(found.causality)} {found.causality}, "
+                            f"not {_article(causality)} {causality}; "
                             f"valid {causality}s of {instance}: {_names(info, causality)}")
     if found.type != "Real":
         raise ScenarioError(f"{role} {dotted!r} is of type {found.type}; connections and records are Real")

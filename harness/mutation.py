@@ -37,6 +37,8 @@ CONTROLLER_TESTS = ("tests/test_adaptive_law_fmu.py", "tests/test_independent_lo
                     "tests/test_controller_math.py", "tests/test_controller_fmu.py")
 PLANT_TESTS = ("tests/test_plants.py", "tests/test_independent_loop.py")
 REFERENCE_TESTS = ("tests/test_plants.py", "tests/test_independent_loop.py")
+GENERAL_TESTS = ("tests/test_general_order.py", "tests/test_controller_math.py")  # order n, m sets (issue 17)
+MOTOR_TESTS = ("tests/test_motor_arm.py",)  # the third-order plant and its closed loop (issue 17)
 TIMEOUT_S = 600
 SKIPPED_IN_COPY = {".git", ".venv", "build", "results", "__pycache__", ".pytest_cache"}
 
@@ -55,8 +57,8 @@ class Mutation:
 M = Mutation
 MUTATIONS = (
     # --- the controller (fmu_src/)
-    M("tau_p12_p22_swap", "fmu_src/afc_math.py", "adaptation_signal", "error * p12 + error_rate * p22",
-      "error * p22 + error_rate * p12", CONTROLLER_TESTS, "tau = [E, dE] P B with p12 and p22 swapped (31)"),
+    M("tau_p12_p22_swap", "fmu_src/afc_math.py", "adaptation_signal", "error[0] * p_b[0] + error[1] * p_b[1]",
+      "error[0] * p_b[1] + error[1] * p_b[0]", CONTROLLER_TESTS, "tau = [E, dE] P B with p12 and p22 swapped (31)"),
     M("projection_upper_sign", "fmu_src/afc_math.py", "projected_rate", "(1.0 + (m_theta - theta_j) / delta)",
       "(1.0 - (m_theta - theta_j) / delta)", CONTROLLER_TESTS, "upper branch of the projection (31)"),
     M("projection_lower_sign", "fmu_src/afc_math.py", "projected_rate", "(1.0 + (m_theta + theta_j) / delta)",
@@ -71,44 +73,56 @@ MUTATIONS = (
       "math.exp(-kappa * x)", CONTROLLER_TESTS, "alpha with exp(-kappa x) instead of exp(-kappa x^2) (23)"),
     M("normalisation_inverted", "fmu_src/afc_math.py", "normalized_input", "z = x / alpha\n", "z = x * alpha\n",
       CONTROLLER_TESTS, "z = x alpha instead of x / alpha (7)"),
-    M("membership_swap", "fmu_src/afc_math.py", "membership_low", "membership_high(-z, slope)",
-      "membership_high(z, slope)", CONTROLLER_TESTS, "mu_1 = mu_2: the low set is the high set"),
-    M("rule_order_swap", "fmu_src/afc_math.py", "fuzzy_basis", "low1 * low2, low1 * high2, high1 * low2",
-      "low1 * low2, high1 * low2, low1 * high2", CONTROLLER_TESTS, "rules (1,2) and (2,1) swapped in xi (8)"),
-    M("sigmoid_slope_dropped", "fmu_src/afc_math.py", "membership_high", "a = slope * z", "a = z",
+    M("membership_swap", "fmu_src/afc_math.py", "memberships", "return sigmoid(slope * (first - z)), sigmoid(",
+      "return sigmoid(slope * (z - first)), sigmoid(", CONTROLLER_TESTS, "mu_1 = mu_2: the low set is the high set"),
+    M("rule_order_swap", "fmu_src/afc_math.py", "fuzzy_basis", "mu1[0] * mu2[1], mu1[1] * mu2[0]",
+      "mu1[1] * mu2[0], mu1[0] * mu2[1]", CONTROLLER_TESTS, "rules (1,2) and (2,1) swapped in xi (8)"),
+    M("sigmoid_slope_dropped", "fmu_src/afc_math.py", "memberships",
+      "return sigmoid(slope * (first - z)), sigmoid(slope * (z - first))", "return sigmoid(first - z), sigmoid(z - first)",
       CONTROLLER_TESTS, "membership slope s ignored"),
-    M("remark3_a1_coefficient", "fmu_src/afc_math.py", "modified_error", "a1 = de0 + lambda_e * e0",
-      "a1 = de0 - lambda_e * e0", CONTROLLER_TESTS, "a1 = de(0) - lambda e(0): E(0) = 0 but dE(0) != 0 (Remark 3)"),
-    M("remark3_rate_sign", "fmu_src/afc_math.py", "modified_error", "(a1 - lambda_e * (a0 + a1 * t))",
-      "(a1 + lambda_e * (a0 + a1 * t))", CONTROLLER_TESTS, "wrong derivative of the offset in dE (Remark 3)"),
-    M("lyapunov_p12_k1", "fmu_src/afc_math.py", "lyapunov_p", "p12 = q1 / (2.0 * k2)", "p12 = q1 / (2.0 * k1)",
-      CONTROLLER_TESTS, "p12 from k1 instead of k2 (30)"),
-    M("lyapunov_p22_q1", "fmu_src/afc_math.py", "lyapunov_p", "(p12 + 0.5 * q2) / k1", "(p12 + 0.5 * q1) / k1",
-      CONTROLLER_TESTS, "p22 from q1 instead of q2 (30)"),
+    M("remark3_a1_coefficient", "fmu_src/afc_math.py", "remark3_coefficients", "(lambda_e ** (k - j)",
+      "((-lambda_e) ** (k - j)", CONTROLLER_TESTS, "a1 = de(0) - lambda e(0): E(0) = 0 but dE(0) != 0 (Remark 3, (36))"),
+    M("remark3_rate_sign", "fmu_src/afc_math.py", "remark3_offset", "((0.0 * t + b1) - lambda_e * value)",
+      "((0.0 * t + b1) + lambda_e * value)", CONTROLLER_TESTS, "wrong derivative of the offset in dE (Remark 3)"),
+    M("lyapunov_k_reversed", "fmu_src/afc_math.py", "lyapunov_p", "row[unknown[n - 1, j]] -= k[n - 1 - i]",
+      "row[unknown[n - 1, j]] -= k[i]", CONTROLLER_TESTS, "companion matrix with k reversed: k1 and k2 swapped (30)"),
+    M("lyapunov_q_reversed", "fmu_src/afc_math.py", "lyapunov_p", "row[size] = -q[i] if i == j",
+      "row[size] = -q[n - 1 - i] if i == j", CONTROLLER_TESTS, "Q = diag(q2, q1) instead of diag(q1, q2) (30)"),
     M("gamma_for_gamma_w", "fmu_src/adaptive_fuzzy_controller_fmu.py", "step", "step_size * self.gamma_w * tau",
       "step_size * self.gamma * tau", CONTROLLER_TESTS, "w_hat learns with gamma instead of gamma_w"),
-    M("fae_w_hat_sign", "fmu_src/adaptive_fuzzy_controller_fmu.py", "compute_outputs", "u += self.w_hat",
-      "u -= self.w_hat", CONTROLLER_TESTS, "u = theta^T xi - w_hat for fae"),
-    M("fae_w_hat_dropped", "fmu_src/adaptive_fuzzy_controller_fmu.py", "compute_outputs", "u += self.w_hat",
-      "u += 0.0 * self.w_hat", CONTROLLER_TESTS, "fae without its estimator in u"),
-    M("kappa2_for_kappa1", "fmu_src/adaptive_fuzzy_controller_fmu.py", "compute_outputs",
-      "contraction_factor(x2, self.lambda_ce, self.kappa2)", "contraction_factor(x2, self.lambda_ce, self.kappa1)",
+    M("fae_w_hat_sign", "fmu_src/afc_math.py", "controller_output", "u += w_hat",
+      "u -= w_hat", CONTROLLER_TESTS, "u = theta^T xi - w_hat for fae"),
+    M("fae_w_hat_dropped", "fmu_src/afc_math.py", "controller_output", "u += w_hat",
+      "u += 0.0 * w_hat", CONTROLLER_TESTS, "fae without its estimator in u"),
+    M("kappa2_for_kappa1", "fmu_src/afc_math.py", "contraction_factors",
+      "contraction_factor(x[1], lambda_ce, kappa[1])", "contraction_factor(x[1], lambda_ce, kappa[0])",
       CONTROLLER_TESTS, "alpha_2 with kappa_1 (23)"),
-    M("universe_e1_for_e2", "fmu_src/adaptive_fuzzy_controller_fmu.py", "compute_outputs",
-      "normalized_input(x2, alpha2, self.E2)", "normalized_input(x2, alpha2, self.E1)", CONTROLLER_TESTS,
-      "input 2 saturated to E1 (7)"),
-    M("theta_euler_sign", "fmu_src/adaptive_fuzzy_controller_fmu.py", "step",
-      "theta3 = self.theta3 + step_size", "theta3 = self.theta3 - step_size", CONTROLLER_TESTS,
-      "theta_3 integrated against its law"),
-    M("fls_state_input_sign", "fmu_src/afc_math.py", "fls_inputs", "return ym - e, dym - de",
-      "return ym - e, dym + de", CONTROLLER_TESTS, "state input x2 = dym + de for fls_input = 2 (Remark 4)"),
+    M("universe_e1_for_e2", "fmu_src/afc_math.py", "normalized_inputs",
+      "normalized_input(x[1], alpha[1], universe[1])", "normalized_input(x[1], alpha[1], universe[0])",
+      CONTROLLER_TESTS, "input 2 saturated to E1 (7)"),
+    M("theta_euler_sign", "fmu_src/afc_math.py", "adapted_weights", "value + step_size * (rate * basis)",
+      "value - step_size * (rate * basis)", CONTROLLER_TESTS, "theta integrated against its law (31)"),
+    M("fls_state_input_sign", "fmu_src/afc_math.py", "fls_inputs", "tuple(map(sub, reference, error))",
+      "tuple(map(sub, error, reference))", CONTROLLER_TESTS, "state input x = e - ym for fls_input = 2 (Remark 4)"),
     M("saturation_lower_bound", "fmu_src/afc_math.py", "normalized_input", "if z < -universe:\n        return -universe",
       "if z < -universe:\n        return universe", CONTROLLER_TESTS, "z below -E saturated to +E (7)"),
-    M("fixed_gets_variable_universes", "fmu_src/adaptive_fuzzy_controller_fmu.py", "compute_outputs",
-      "if variant == afc_math.VARIANT_VUD:", "if variant != afc_math.VARIANT_FAE:", CONTROLLER_TESTS,
+    M("fixed_gets_variable_universes", "fmu_src/afc_math.py", "controller_output",
+      "if variant == VARIANT_VUD:", "if variant != VARIANT_FAE:", CONTROLLER_TESTS,
       "the fixed-universe stand-in contracts its universes"),
-    M("latch_de0", "fmu_src/adaptive_fuzzy_controller_fmu.py", "initialize", "self.e0, self.de0 = self.e, self.de",
-      "self.e0, self.de0 = self.e, 0.0", CONTROLLER_TESTS, "de(0) not latched (Remark 3)"),
+    M("latch_de0", "fmu_src/initial_error_latch.py", "start",
+      "state[LATCHED + i] = state[LATCHED + n + i] = state[LATCHED + 2 * n + i] = float(sample[i])",
+      "state[LATCHED + i] = state[LATCHED + n + i] = state[LATCHED + 2 * n + i] = float(sample[0])",
+      CONTROLLER_TESTS, "de(0) latched as e(0) (Remark 3)"),
+    # --- the general controller: n inputs, m sets (issue 17)
+    M("membership_middle_sign", "fmu_src/afc_math.py", "memberships", "result.append(previous - rising)",
+      "result.append(rising - previous)", GENERAL_TESTS, "middle sets sig(c_l) - sig(c_(l-1)): negative"),
+    M("boundaries_spacing", "fmu_src/afc_math.py", "membership_boundaries", "-universe + 2.0 * universe * l / sets",
+      "-universe + universe * l / sets", GENERAL_TESTS, "boundaries c_l = -E + E l / m: crowded on the left"),
+    M("basis_order_general", "fmu_src/afc_math.py", "fuzzy_basis", "xi = [a * b for a in xi for b in mu]",
+      "xi = [a * b for b in mu for a in xi]", GENERAL_TESTS, "l1 fastest instead of slowest for n >= 3 (8)"),
+    M("remark3_recursion_sign", "fmu_src/afc_math.py", "remark3_offset",
+      "values = [values[j + 1] - lambda_e * values[j]", "values = [values[j + 1] + lambda_e * values[j]",
+      GENERAL_TESTS, "r_i = r_(i-1)' + lambda r_(i-1): E^(i)(t0) != 0 for n >= 3 (36)"),
     # --- the plants and the reference (plants/)
     M("pendulum_denominator_sign", "plants/inverted_pendulum_model.py", "pendulum_derivative",
       "FOUR_THIRDS - mp_over_mt * c * c", "FOUR_THIRDS + mp_over_mt * c * c", PLANT_TESTS,
@@ -155,6 +169,13 @@ MUTATIONS = (
       "self.de = self.dy - dym", REFERENCE_TESTS, "de = dy - dym"),
     M("reference_acceleration_sign", "plants/tracking_reference_fmu.py", "compute_outputs",
       "-amplitude * omega * omega * s", "amplitude * omega * omega * s", REFERENCE_TESTS, "ddym sign"),
+    M("reference_d2e_sign", "plants/tracking_reference_fmu.py", "compute_outputs", "self.d2e = ddym - self.d2y",
+      "self.d2e = self.d2y - ddym", MOTOR_TESTS, "d2e = d2y - ddym"),
+    M("motor_back_emf_sign", "plants/dc_motor_arm_model.py", "motor_arm_derivative",
+      "(u - resistance * x3 - ke * x2) * inv_l", "(u - resistance * x3 + ke * x2) * inv_l", MOTOR_TESTS,
+      "back-emf adds to the armature voltage"),
+    M("rk4_states_weights", "plants/plant_integration.py", "rk4_advance_states", "sixth * (b1 + 2.0 * (b2 + b3) + b4)",
+      "sixth * (b1 + 2.0 * (b2 + b3) + 2.0 * b4)", MOTOR_TESTS, "n-state RK4 weight of k4 doubled"),
 )
 
 
@@ -282,7 +303,9 @@ def select(names) -> list:
     known = {m.name: m for m in MUTATIONS}
     unknown = [n for n in names if n not in known]
     if unknown:
-        raise SystemExit(f"error: unknown mutation {', '.join(unknown)}; valid: {', '.join(known)}")
+        from .cli_args import UsageError
+
+        raise UsageError(f"unknown mutation {', '.join(unknown)}; valid: {', '.join(known)}")
     return [known[n] for n in names]
 
 
@@ -327,10 +350,12 @@ def _run_one(arguments: tuple) -> Outcome:
 
 
 def register(commands):
+    from . import cli_args
+
     parser = commands.add_parser("mutate", help="mutation testing of fmu_src/ and plants/: score and survivors")
     parser.add_argument("--only", nargs="+", metavar="NAME", help="these mutations (default: all)")
     parser.add_argument("--list", action="store_true", help="list the mutations and check their patterns")
     parser.add_argument("--tests", nargs="+", help="pytest selection for every mutant (default: each mutation's own)")
-    parser.add_argument("--jobs", type=int, default=1, help="mutants in parallel (default 1)")
-    parser.add_argument("--timeout", type=float, default=TIMEOUT_S, help="seconds per mutant's tests")
+    parser.add_argument("--jobs", type=cli_args.positive_int, default=1, help="mutants in parallel (default 1)")
+    parser.add_argument("--timeout", type=cli_args.positive_float, default=TIMEOUT_S, help="seconds per mutant's tests")
     parser.set_defaults(handler=mutate_command)

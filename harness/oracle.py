@@ -60,7 +60,6 @@ def simulate_oracle(scenario: Scenario, algorithm: str = "feedthrough") -> dict:
     reference = _parameters(scenario, "reference")
     controller = _parameters(scenario, "controller")
     amplitude, omega = reference["amplitude"], reference["omega"]
-    _, p12, p22 = afc_math.lyapunov_p(controller["k1"], controller["k2"], controller["q1"], controller["q2"])
     variant = controller["variant"]
     gamma, m_theta, delta, gamma_w = (controller["gamma"], controller["m_theta"], controller["delta"],
                                       controller["gamma_w"])
@@ -73,39 +72,43 @@ def simulate_oracle(scenario: Scenario, algorithm: str = "feedthrough") -> dict:
         return ym, dym, ym - y, dym - dy
 
     x1, x2 = float(plant["x1_start"]), float(plant["x2_start"])
-    theta, w_hat = [float(controller["theta0"])] * 4, 0.0
     # initial values propagated in dependency order (both algorithms)
     ym, dym, e, de = reference_outputs(start, x1, x2)
-    if controller.get("initial_error", 1) != 2:  # 2: pinned by the parameters e0, de0
-        controller = dict(controller, e0=e, de0=de)  # consistent start inputs: the latch keeps them
-    p = controller
+    if controller.get("initial_error", 1) == 2:  # pinned by the parameters e0, de0
+        error0 = (controller["e0"], controller["de0"])
+    else:  # consistent start inputs: the latch keeps them
+        error0 = (e, de)
+    p = afc_math.controller_parameters(controller, error0, start)
+    if p["order"] != 2:
+        raise ValueError(f"the oracle knows second-order plants, not order = {p['order']}")
+    theta, w_hat = [float(controller["theta0"])] * p["rules"], 0.0
     held_reference = (x1, x2)
-    held_controller = (e, de, ym, dym)
-    held_u = afc_math.controller_output(e, de, ym, dym, 0.0, theta, w_hat, p)[0]
+    held_controller = ((e, de), (ym, dym))
+    held_u = afc_math.controller_output((e, de), (ym, dym), start, theta, w_hat, p)[0]
 
     names = ["plant.y", "plant.dy", "reference.ym", "reference.dym", "reference.e", "reference.de",
              "controller.u", "controller.E", "controller.dE", "controller.alpha1", "controller.alpha2",
-             "controller.theta1", "controller.theta2", "controller.theta3", "controller.theta4",
+             *(f"controller.theta{j + 1}" for j in range(len(theta))),
              "controller.w_hat", *plant_extra(start, x1, x2)]
     table = np.empty((steps + 1, len(names)))
     for n in range(steps + 1):
         t = start + n * step
         if algorithm == "jacobi":
             ym, dym, e, de = reference_outputs(t, *held_reference)
-            u, *diagnostics = afc_math.controller_output(*held_controller, t - start, theta, w_hat, p)[:5]
+            u, modified, alpha, _ = afc_math.controller_output(*held_controller, t, theta, w_hat, p)
         else:
             ym, dym, e, de = reference_outputs(t, x1, x2)
-            u, *diagnostics = afc_math.controller_output(e, de, ym, dym, t - start, theta, w_hat, p)[:5]
+            u, modified, alpha, _ = afc_math.controller_output((e, de), (ym, dym), t, theta, w_hat, p)
+        diagnostics = (*modified, *alpha)
         table[n] = (x1, x2, ym, dym, e, de, u, *diagnostics, *theta, w_hat if variant == 3 else 0.0,
                     *plant_extra(t, x1, x2).values())
         if n == steps:
             break
-        held_reference, held_controller, held_u = (x1, x2), (e, de, ym, dym), u
+        held_reference, held_controller, held_u = (x1, x2), ((e, de), (ym, dym)), u
         # controller: theta over [t, t + h] from E, dE, xi at t with its inputs as now set
-        _, error, error_rate, _, _, xi = afc_math.controller_output(*held_controller, t - start, theta, w_hat, p)
-        tau = afc_math.adaptation_signal(error, error_rate, p12, p22)
-        theta = [theta[j] + step * afc_math.projected_rate(theta[j], tau, xi[j], gamma, m_theta, delta)
-                 for j in range(4)]
+        _, modified, _, xi = afc_math.controller_output(*held_controller, t, theta, w_hat, p)
+        tau = afc_math.adaptation_signal(modified, p["p_b"])
+        theta = afc_math.adapted_weights(theta, tau, xi, gamma, m_theta, delta, step)
         if variant == afc_math.VARIANT_FAE:
             w_hat += step * gamma_w * tau
         x1, x2 = plant_integration.rk4_advance(derivative, t, x1, x2, held_u, step, max_internal_step,

@@ -25,9 +25,9 @@ per worker, no state shared with a parent that may hold loaded FMUs).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import datetime
 import io
-import functools
 import json
 import os
 import platform
@@ -42,10 +42,11 @@ from pathlib import Path
 import numpy as np
 
 from . import scenario as scenarios
+from .cases import Case
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE_DIR = Path(__file__).resolve().parent / "references"
-DEFAULT_REPORT_DIR = ROOT / "results" / "regression"
+DEFAULT_REPORT_DIR = Path("results") / "regression"  # in the working directory, like tables' results/
 SIGNALS = ("plant.y", "plant.dy", "controller.u", "controller.theta1", "controller.theta2", "controller.theta3",
            "controller.theta4", "reference.e", "reference.de")
 POINTS = 2001
@@ -56,33 +57,10 @@ VALUE_FORMAT = "%.10g"  # 10 significant digits: 1e-10 relative, far inside the 
 DEFAULT_TOLERANCES = {"atolx": 1e-3, "atoly": 0.0, "ltolx": 0.0, "ltoly": 1e-3, "rtolx": 0.0, "rtoly": 1e-3}
 
 
-@dataclass(frozen=True)
-class Case:
-    scenario: str
-    controller: str
-    overrides: tuple = ()  # (("controller.gamma", 290.0), ...): a mutated run, compared with the same reference
-
-    @property
-    def name(self) -> str:
-        return f"{self.scenario}_{self.controller}"
-
-    @property
-    def label(self) -> str:
-        if not self.overrides:
-            return self.name
-        return self.name + " [" + ", ".join(f"{k}={v:g}" for k, v in self.overrides) + "]"
-
-    def scenario_object(self):
-        result = scenarios.load(self.scenario).with_controller(self.controller)
-        for dotted, value in self.overrides:
-            result = result.with_parameter(dotted, value)
-        return result
-
-
 def all_cases(names=None, controllers=None, overrides=()) -> list[Case]:
     names = list(names or scenarios.scenario_names())
     controllers = list(controllers or scenarios.CONTROLLER_VARIANTS)
-    return [Case(n, c, tuple(overrides)) for n in names for c in controllers]
+    return [Case(n, c, overrides=tuple(overrides)) for n in names for c in controllers]
 
 
 def reference_paths(case: Case, directory: Path = REFERENCE_DIR) -> tuple[Path, Path]:
@@ -102,43 +80,18 @@ class CaseRun:
     error: str | None = None  # the run failed (message); signals then hold what was computed
 
 
-def resample(time: np.ndarray, values: np.ndarray, start: float, stop: float, points: int) -> tuple:
-    grid = np.linspace(start, stop, points)
-    if len(time) == 0:
-        return grid, np.full(points, np.nan)
-    inside = grid <= time[-1] + 1e-12
-    resampled = np.full(points, np.nan)
-    resampled[inside] = np.interp(grid[inside], time, values)
-    return grid, resampled
-
-
-def run_case(case: Case, fmu_paths: dict | None = None, points: int = POINTS) -> CaseRun:
-    """Simulate one case with our master (feedthrough) and resample its comparison signals."""
-    from .master import SimulationFailed, simulate
-
-    scenario = case.scenario_object()
-    wall = clock.perf_counter()
-    error = None
-    try:
-        result = simulate(scenario, fmu_paths=fmu_paths)
-    except SimulationFailed as failure:
-        result, error = failure.result, str(failure)
-    wall = clock.perf_counter() - wall
-    signals, grid = {}, None
-    for name in SIGNALS:
-        grid, signals[name] = resample(result.time, result.signal(name), scenario.start, scenario.stop, points)
-    return CaseRun(case, scenario.start, scenario.stop, scenario.step, grid, signals, wall, error)
-
-
 def run_cases(cases, workers: int | None = None, fmu_paths: dict | None = None, points: int = POINTS) -> list:
-    """Run the cases in a process pool (every core by default); results in the order of ``cases``."""
-    if fmu_paths is None:
-        import build_fmu
+    """Run the cases with the shared runner (a process pool, every core by default), resampled for comparison.
 
-        fmu_paths = build_fmu.ensure_built()
-    from .cases import parallel_map
+    Results in the order of ``cases``; a failed run keeps what it computed (NaN after it stopped).
+    """
+    from . import cases as shared
 
-    return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths, points=points), cases, workers)
+    wanted = [dataclasses.replace(case, points=points, signals=SIGNALS, figure_interval=None) for case in cases]
+    outcomes = shared.run_cases(wanted, jobs=workers, fmu_paths=fmu_paths, progress=False)
+    return [CaseRun(case, outcome["start"], outcome["stop"], outcome["step"], outcome["time"], outcome["signals"],
+                    outcome["wall_s"], outcome["reason"] if outcome["status"] != "ok" else None)
+            for case, outcome in zip(cases, outcomes)]
 
 
 # --------------------------------------------------------------- references
@@ -314,7 +267,10 @@ def plot_signal(path: Path, case: Case, comparison: SignalComparison, reference:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .units import variable_unit, with_unit
+
     name = comparison.signal
+    unit = variable_unit(scenarios.load(case.scenario), name)
     funnel = comparison.funnel or {}
     figure, (whole, zoom, excursion) = plt.subplots(3, 1, figsize=(9, 8), gridspec_kw={"height_ratios": [3, 3, 1.3]})
     for axis in (whole, zoom):
@@ -325,7 +281,7 @@ def plot_signal(path: Path, case: Case, comparison: SignalComparison, reference:
                               color="tab:gray", alpha=0.35, lw=0, label="tube")
         axis.plot(reference.time, reference.signals[name], color="k", lw=0.9, label="reference")
         axis.plot(run.time, run.signals[name], color="tab:red", lw=0.9, label="new result")
-        axis.set_ylabel(name)
+        axis.set_ylabel(with_unit(name, unit))
     centre = comparison.t_max_error if comparison.t_max_error is not None else float(reference.time[-1]) / 2
     half = 0.02 * float(reference.time[-1] - reference.time[0]) + 1e-9
     inside = (reference.time >= centre - half) & (reference.time <= centre + half)
@@ -341,8 +297,8 @@ def plot_signal(path: Path, case: Case, comparison: SignalComparison, reference:
     whole.legend(fontsize=8, loc="best")
     if "errors" in funnel:
         excursion.plot(funnel["errors"][:, 0], funnel["errors"][:, 1], color="tab:red", lw=0.8)
-    excursion.set_ylabel("outside tube")
-    excursion.set_xlabel("time [s]")
+    excursion.set_ylabel(with_unit("outside tube", unit))
+    excursion.set_xlabel("time (s)")
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
@@ -441,22 +397,17 @@ def regress(cases, update: bool = False, report_dir=DEFAULT_REPORT_DIR, toleranc
     return Outcome(comparisons, runs, report, written)
 
 
-def _parse_overrides(assignments) -> tuple:
-    overrides = []
-    for assignment in assignments or []:
-        dotted, sep, value = assignment.partition("=")
-        if not sep:
-            raise scenarios.ScenarioError(f"--set {assignment!r}: write INSTANCE.PARAMETER=VALUE")
-        overrides.append((dotted.strip(), float(value)))
-    return tuple(overrides)
-
-
 def regress_command(args) -> int:
+    from . import cli_args
+
     names = args.scenarios or scenarios.scenario_names()
+    overrides = tuple(args.set or ())
+    if args.update and overrides:
+        raise cli_args.UsageError("--update with --set: a mutated run never becomes a reference; drop one")
     for name in names:
-        scenarios.load(name)  # a clear error for an unknown name
+        cli_args.check_assignments(scenarios.load(name), overrides)
     tolerances = {key: getattr(args, key) for key in DEFAULT_TOLERANCES if getattr(args, key) is not None}
-    cases = all_cases(names, args.controller, _parse_overrides(args.set))
+    cases = all_cases(names, args.controller, overrides)
     print(f"running {len(cases)} case(s) on {min(len(cases), args.workers or os.cpu_count() or 1)} process(es)...",
           file=sys.stderr)
     wall = clock.perf_counter()
@@ -483,20 +434,23 @@ def regress_command(args) -> int:
 
 
 def register(commands):
+    from . import cli_args
+
     regress_parser = commands.add_parser(
         "regress", help="compare every case with its reference result inside a tolerance tube (pyfunnel)")
-    regress_parser.add_argument("scenarios", nargs="*", metavar="SCENARIO",
+    regress_parser.add_argument("scenarios", nargs="*", metavar="SCENARIO", type=cli_args.scenario,
                                 help=f"scenario names (default: all: {', '.join(scenarios.scenario_names())})")
     regress_parser.add_argument("--controller", nargs="+", choices=tuple(scenarios.CONTROLLER_VARIANTS),
                                 help="controllers (default: all)")
     regress_parser.add_argument("--update", action="store_true",
                                 help="rewrite the reference results from this run (the only way they change)")
     regress_parser.add_argument("--report", default=str(DEFAULT_REPORT_DIR),
-                                help="directory for report.md and the PNGs of failing signals")
-    regress_parser.add_argument("--workers", type=int, help="processes (default: every core)")
-    regress_parser.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE",
+                                help="directory for report.md and the PNGs of failing signals (default results/regression)")
+    regress_parser.add_argument("--workers", type=cli_args.positive_int, help="processes (default: every core)")
+    regress_parser.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE", type=cli_args.assignment,
                                 help="run with a parameter changed (e.g. controller.gamma=290: a mutation that "
                                      "must fail); never allowed with --update")
     for key, value in DEFAULT_TOLERANCES.items():
-        regress_parser.add_argument(f"--{key}", type=float, help=f"pyfunnel tolerance {key} (default {value:g})")
+        regress_parser.add_argument(f"--{key}", type=cli_args.non_negative_float,
+                                    help=f"pyfunnel tolerance {key} (default {value:g})")
     regress_parser.set_defaults(handler=regress_command)

@@ -5,6 +5,8 @@
 table2.csv, report.md and figures like the paper's Figs. 4-8 to DIR.  It also
 runs each case at half its step (and, with ``--refine``, the cases an open claim
 needs finer still): harness/claims.py decides the paper's claims on those ladders.
+Beyond the paper, it runs the third-order plant (motor_arm x vud, fixed, fae x
+m = 2, 3 fuzzy sets) into table3_beyond_paper.csv and a section of report.md.
 The step study behind each scenario's step is harness/step_study.py.
 """
 from __future__ import annotations
@@ -20,23 +22,26 @@ from . import scenario as scenarios
 from .cases import Case, default_jobs, run_cases
 from .step_study import convergence_summary, load_convergence, validated_step
 
+ROOT = Path(__file__).resolve().parents[1]
 CONTROLLERS = tuple(scenarios.CONTROLLER_VARIANTS)  # vud, fixed, fae
 PENDULUM = ("pendulum_case1", "pendulum_case2", "pendulum_case3")
 ALL_SCENARIOS = (*PENDULUM, "manipulator")
 TABLE_COLUMNS = ("scenario", "controller", "ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec",
                  "umax", "tv_u", "step", "validated_step", "status")
 PAPER_METRICS = ("ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec")
+BEYOND_PAPER = "motor_arm"  # a third-order plant of our own (docs/general_order.md)
+BEYOND_PAPER_SETS = (2, 3)  # fuzzy sets per input: M = 8 and 27 rules at order 3
 CONTROLLER_NAMES = {"vud": "proposed AFC (variable universes)", "fixed": "stand-in for [46] (fixed universes)",
                     "fae": "stand-in for [28] (fixed universes + error estimator)"}
 
 
 # ------------------------------------------------------------------ tables
-def write_table(path: Path, rows: list):
+def write_table(path: Path, rows: list, columns=TABLE_COLUMNS):
     with open(path, "w", newline="") as stream:
-        writer = csv.DictWriter(stream, fieldnames=TABLE_COLUMNS, extrasaction="ignore")
+        writer = csv.DictWriter(stream, fieldnames=columns, extrasaction="ignore")
         writer.writeheader()
         for row in rows:
-            writer.writerow({key: _csv_value(row.get(key)) for key in TABLE_COLUMNS})
+            writer.writerow({key: _csv_value(row.get(key)) for key in columns})
 
 
 def _csv_value(value):
@@ -67,6 +72,26 @@ def paper_table(rows: list, scenario: str) -> str:
     return "\n".join(lines)
 
 
+def beyond_paper_cases(stop=None) -> list:
+    """The extra runs: the third-order plant with every controller at m = 2 and 3 sets per input."""
+    return [Case(BEYOND_PAPER, controller, stop=stop, overrides=(("controller.sets", sets),))
+            for sets in BEYOND_PAPER_SETS for controller in CONTROLLERS]
+
+
+def beyond_paper_table(rows: list) -> str:
+    """The third-order plant's scores (||e|| over e, de, d2e) per controller and number of sets."""
+    lines = ["| controller | sets m (rules) | ts (s) | es1 (%) | es2 (%) | ITAE | IAE | Ec | umax | TV(u)/s |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        shape = f"{row['sets']} ({row['sets'] ** 3})"
+        if row["status"] != "ok":
+            lines.append(f"| {row['controller']} | {shape} | {row['status']}: {row['reason']} |||||||| ")
+            continue
+        lines.append("| " + " | ".join([row["controller"], shape, *(_fmt(row[k]) for k in PAPER_METRICS),
+                                         _fmt(row["umax"]), _fmt(row["tv_u"])]) + " |")
+    return "\n".join(lines)
+
+
 def figures(rows: list, out: Path) -> list:
     """Figs. 4-8 like the paper's: x1 vs ym, x2 vs dym, e, de, ||e||, u of the three controllers."""
     import matplotlib
@@ -83,9 +108,18 @@ def figures(rows: list, out: Path) -> list:
                       key=lambda r: order[r["controller"]])
         if not runs:
             continue
+        from .units import variable_unit, with_unit
+
         fig, axes = plt.subplots(3, 2, figsize=(11, 9), sharex=True)
-        panels = [("x1 and ym (rad)", "plant.y"), ("x2 and dym (rad/s)", "plant.dy"), ("e (rad)", "reference.e"),
-                  ("de (rad/s)", "reference.de"), ("||e||", None), ("u", "controller.u")]
+        configured = scenarios.load(name)
+        unit = {dotted: variable_unit(configured, dotted) for dotted in
+                ("plant.y", "plant.dy", "reference.e", "reference.de", "controller.u")}
+        panels = [(with_unit("x1 and ym", unit["plant.y"]), "plant.y"),
+                  (with_unit("x2 and dym", unit["plant.dy"]), "plant.dy"),
+                  (with_unit("e", unit["reference.e"]), "reference.e"),
+                  (with_unit("de", unit["reference.de"]), "reference.de"),
+                  (with_unit("||e|| = sqrt(e^2 + de^2)", f"{unit['reference.e']}, {unit['reference.de']}"), None),
+                  (with_unit("u", unit["controller.u"]), "controller.u")]
         for axis, (title, signal) in zip(axes.flat, panels):
             for run in runs:
                 s = run["signals"]
@@ -97,6 +131,7 @@ def figures(rows: list, out: Path) -> list:
                 axis.plot(runs[0]["signals"]["time"], runs[0]["signals"]["reference.dym"], "k--", lw=0.8,
                           label="dym")
             axis.set_title(title, fontsize=10)
+            axis.set_ylabel(title.split(" (")[-1].rstrip(")") if " (" in title else "", fontsize=8)
             axis.grid(alpha=0.3)
         axes[0, 0].legend(fontsize=8)
         for axis in axes[-1]:
@@ -111,7 +146,7 @@ def figures(rows: list, out: Path) -> list:
 
 
 def choices_text() -> str:
-    return """The numbers depend on these choices of SPEC.md (the paper is ambiguous there):
+    return """The numbers depend on these choices (the paper is ambiguous there; all of them: docs/model.md, section 10):
 - Normalised FLS inputs saturated to the universe [-E_i, E_i]; sigmoid membership functions (slope 7 pendulum, 1.5 manipulator).
 - Modified tracking error E = e - (a0 + a1 t) exp(-5 t) (Remark 3) used by all three controllers, e(0), de(0) latched at the end of initialisation.
 - Comparison controllers are documented stand-ins with the same learning rate (gamma = 300): `fixed` (alpha = 1) for [46], `fae` (alpha = 1 plus w_hat, gamma_w = gamma) for [28]; the equations of [46] and [28] are not public here.
@@ -137,7 +172,7 @@ CLAIMS_METHOD = (
 
 
 def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: list, wall_s: float, jobs: int,
-                    peak_mib: float = float("nan")) -> str:
+                    peak_mib: float = float("nan"), beyond_rows=()) -> str:
     parts = ["# Table I / Table II: co-simulation report", "",
              f"Generated by `python -m harness tables` in {wall_s:.1f} s wall (with the claims' step ladders) "
              f"on {jobs} processes "
@@ -148,6 +183,12 @@ def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: l
     for name in PENDULUM:
         parts += [f"### {name}: {scenarios.load(name).description}", "", paper_table(rows, name), ""]
     parts += ["## Table II: single-link manipulator with friction", "", paper_table(rows, "manipulator"), ""]
+    if beyond_rows:
+        beyond = scenarios.load(BEYOND_PAPER)
+        parts += ["## Beyond the paper: a third-order plant", "",
+                  f"{beyond.description}; the controller at order n = 3 (inputs e, de, d2e; ||e|| over all "
+                  f"three) with m = 2 and 3 fuzzy sets per input, step {beyond.step:g} s "
+                  "(converged by halving, docs/general_order.md).", "", beyond_paper_table(beyond_rows), ""]
     parts += ["## Claims of the paper, checked", "", CLAIMS_METHOD, ""]
     parts += claims_module.claims_markdown(claims)
     parts += ["", "## Choices the numbers depend on", "", choices_text(), ""]
@@ -191,22 +232,31 @@ def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int
     return claims, refined
 
 
+#: the figure the README shows; ``tables --apply`` copies it from the report into docs/
+README_FIGURE = "pendulum_case2.png"
+DOCS_DIR = ROOT / "docs"
+
+
 def tables_command(args) -> int:
-    if args.refine < 0:
-        print(f"error: --refine {args.refine} is invalid; give 0 (decide on h and h/2 only) or more levels",
-              file=sys.stderr)
-        return 2
+    from . import cli_args
+
     out = Path(args.out)
+    cli_args.refuse_tracked([out / name for name in ("table1.csv", "table2.csv", "table3_beyond_paper.csv", "report.md",
+                                                     *(f"{n}.png" for n in ALL_SCENARIOS))])
     out.mkdir(parents=True, exist_ok=True)
     jobs = args.jobs or default_jobs()
     cases = [Case(name, controller, stop=args.stop, figure_interval=0.01)
              for name in ALL_SCENARIOS for controller in CONTROLLERS]
     # every case at h (the tables) and at h/2 (the claims' error estimates) in one pool,
     # the longest runs first, so both cores finish together
+    extra = beyond_paper_cases(args.stop)  # the third-order plant, beyond the paper (no claims)
     runs = sorted([*cases, *map(half_step_case, cases)], key=case_cost, reverse=True)
     started = clock.perf_counter()
-    outcomes = dict(zip(runs, run_cases(runs, jobs=jobs, description="Table I/II co-simulations and half steps")))
+    everything = sorted([*runs, *extra], key=case_cost, reverse=True)
+    outcomes = dict(zip(everything, run_cases(everything, jobs=jobs,
+                                              description="Table I/II co-simulations and half steps")))
     rows = [outcomes[case] for case in cases]
+    beyond_rows = [dict(outcomes[case], sets=dict(case.overrides)["controller.sets"]) for case in extra]
     ladders = claims_module.ladders_from_rows([outcomes[case] for case in runs])
     ladder_s = clock.perf_counter() - started
     claims, refined = refine_open_claims(ladders, args.stop, jobs, args.refine)
@@ -215,34 +265,60 @@ def tables_command(args) -> int:
     convergence = load_convergence()
     for row in rows:
         row["validated_step"] = validated_step(convergence, row["scenario"], row["controller"])
+    if args.stop is not None and args.stop < 2 * math.pi:  # es1, es2: over the last reference period
+        print(f"warning: --stop {args.stop:g} < 2 pi: es1 and es2 (taken over the last reference period) "
+              "are left out as n/a", file=sys.stderr)
+        for row in rows:
+            row["es1_pct"] = row["es2_pct"] = None
     write_table(out / "table1.csv", [r for r in rows if r["scenario"] in PENDULUM])
     write_table(out / "table2.csv", [r for r in rows if r["scenario"] == "manipulator"])
+    write_table(out / "table3_beyond_paper.csv", beyond_rows,
+                ("scenario", "controller", "sets", *TABLE_COLUMNS[2:-2], "status"))
     figure_paths = figures(rows, out)
-    (out / "report.md").write_text(report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib))
+    (out / "report.md").write_text(report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib,
+                                                   beyond_rows))
     print(f"{len(rows)} co-simulations and the same at half the step in {ladder_s:.1f} s, {len(refined)} finer "
           f"for open claims in {wall_s - ladder_s:.1f} s: {wall_s:.1f} s wall on {jobs} processes; peak memory "
           f"{peak_mib:.0f} MiB (largest process)")
     for name in ALL_SCENARIOS:
         print(f"\n{name}\n{paper_table(rows, name)}")
+    print(f"\n{BEYOND_PAPER} (beyond the paper)\n{beyond_paper_table(beyond_rows)}")
     print("\nclaims (decided on the step ladders, see the report):")
     for claim in claims:
         print(f"  {claim.verdict:29s} {claim.label}")
     if refined:
         print("refined for open claims: " + ", ".join(f"{s}/{c} at {h:g} s" for s, c, h in refined))
-    print(f"\nwritten: {out / 'table1.csv'}, {out / 'table2.csv'}, {out / 'report.md'}, "
+    print(f"\nwritten: {out / 'table1.csv'}, {out / 'table2.csv'}, {out / 'table3_beyond_paper.csv'}, "
+          f"{out / 'report.md'}, "
           f"{len(figure_paths)} figures")
-    failed = [r for r in rows if r["status"] != "ok"]
+    failed = [r for r in rows + beyond_rows if r["status"] != "ok"]
     for row in failed:
         print(f"error: {row['scenario']}/{row['controller']}: {row['reason']}", file=sys.stderr)
+    if args.apply:
+        if failed or args.stop is not None:
+            print("error: --apply refused: the docs show complete runs over the scenarios' horizon "
+                  "(no --stop, no failed run)", file=sys.stderr)
+            return 1
+        import shutil
+
+        target = DOCS_DIR / README_FIGURE
+        shutil.copyfile(out / README_FIGURE, target)
+        print(f"applied: {target} (the README's figure) from {out / README_FIGURE}")
     return 1 if failed else 0
 
 
 def register(commands):
-    tables = commands.add_parser("tables", help="run Table I/II (12 co-simulations) and write the report")
-    tables.add_argument("--out", default="results", help="output folder (default results/)")
-    tables.add_argument("--jobs", type=int, help="parallel processes (default: every core)")
-    tables.add_argument("--stop", type=float, help="shorter horizon (tests); default the scenarios' 20 s")
-    tables.add_argument("--refine", type=int, default=1, metavar="LEVELS",
+    from . import cli_args
+
+    tables = commands.add_parser("tables", help="run Table I/II (12 co-simulations) and the third-order "
+                                                "plant beyond the paper (6) and write the report")
+    tables.add_argument("--out", default="results", help="output folder (default results/, ignored by git)")
+    tables.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
+    tables.add_argument("--stop", type=cli_args.positive_float,
+                        help="shorter horizon (tests); default the scenarios' 20 s")
+    tables.add_argument("--refine", type=cli_args.non_negative_int, default=1, metavar="LEVELS",
                         help="further halvings of the step for the cases an open claim needs (default 1; 0: "
                              "decide on h and h/2 only)")
+    tables.add_argument("--apply", action="store_true",
+                        help=f"also copy the README's figure ({README_FIGURE}) into docs/ (full runs only)")
     tables.set_defaults(handler=tables_command)

@@ -21,7 +21,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 CONTROLLER_VARIANTS = {"vud": 1, "fixed": 2, "fae": 3}
-SIGNAL_ROLES = ("e", "de", "ym", "dym", "u")
+SIGNAL_ROLES = ("e", "de", "ym", "dym", "u", "d2e", "d3e")  # d2e, d3e: plants of order 3, 4
 
 
 class ScenarioError(ValueError):
@@ -72,6 +72,7 @@ class Scenario:
     divergence_bound: float = 1e8
     bounds: dict = field(default_factory=dict)  # "instance.variable" -> its own divergence bound
     path: Path | None = None
+    notes: list = field(default_factory=list)  # what configure() changed that the user did not ask for
 
     def bound(self, dotted: str) -> float:
         """The divergence bound of one signal: its own, else the scenario's."""
@@ -115,8 +116,18 @@ class Scenario:
 
 
 def configure(name_or_path, controller: str | None = None, step: float | None = None,
-              stop: float | None = None, overrides=()) -> Scenario:
-    """A scenario with the controller variant, step, stop and ``instance.parameter`` values set."""
+              stop: float | None = None, overrides=(), fit_stop: str = "error") -> Scenario:
+    """A scenario with the controller variant, step, stop and ``instance.parameter`` values set.
+
+    The run covers a whole number of steps.  A stop that was given (``stop`` or an
+    override) and is not a whole number of steps from the start is an error naming
+    both and the nearest valid stop, unless ``fit_stop="move"`` (studies that try
+    many steps on one horizon: the step study, sweeps over the step); the scenario's
+    own stop, when only the step was changed, is moved.  A moved stop is said in
+    ``notes`` (the run command prints it; a case's outcome carries it).
+    """
+    if fit_stop not in ("error", "move"):
+        raise ValueError(f"fit_stop={fit_stop!r}; valid: error, move")
     scenario = load(name_or_path)
     if controller is not None:
         scenario = scenario.with_controller(controller)
@@ -126,6 +137,26 @@ def configure(name_or_path, controller: str | None = None, step: float | None = 
         scenario = scenario.with_parameter("stop", stop)
     for dotted, value in overrides:
         scenario = scenario.with_parameter(dotted, value)
+    given = {name for name, value in (("step", step), ("stop", stop)) if value is not None}
+    given |= {dotted for dotted, _ in overrides if dotted in ("step", "stop", "start")}
+    if given:
+        whole_steps(scenario, stop_given=fit_stop == "error" and bool(given & {"stop", "start"}))
+    return scenario
+
+
+def whole_steps(scenario: Scenario, stop_given: bool) -> Scenario:
+    """Make sure the run covers a whole number of steps (see :func:`configure`); returns ``scenario``."""
+    count = scenario.steps  # also: finite numbers, step > 0, at least one step
+    nearest = scenario.start + count * scenario.step
+    if abs(nearest - scenario.stop) <= 1e-9 * max(abs(scenario.stop), scenario.step):
+        return scenario
+    if stop_given:
+        raise ScenarioError(f"stop = {scenario.stop:g} s is not a whole number of steps of {scenario.step:g} s "
+                            f"from start = {scenario.start:g} s ({(scenario.stop - scenario.start) / scenario.step:.6g}"
+                            f" steps); nearest valid stop: {nearest:.12g} s")
+    scenario.notes.append(f"stop moved from {scenario.stop:g} s to {nearest:.12g} s, a whole number of steps "
+                          f"({count}) of {scenario.step:g} s")
+    scenario.stop = nearest
     return scenario
 
 
@@ -134,12 +165,17 @@ def scenario_names() -> list[str]:
 
 
 def load(name_or_path) -> Scenario:
-    """Load a scenario by name (harness/scenarios/NAME.toml) or by file path."""
+    """Load a scenario by name (harness/scenarios/NAME.toml) or by file path (a Scenario: a copy of it)."""
+    if isinstance(name_or_path, Scenario):
+        return copy.deepcopy(name_or_path)
     path = Path(name_or_path)
     if path.suffix != ".toml":
         path = SCENARIO_DIR / f"{name_or_path}.toml"
     if not path.exists():
-        raise ScenarioError(f"unknown scenario {str(name_or_path)!r}; valid: {', '.join(scenario_names())}")
+        if Path(name_or_path).suffix == ".toml":
+            raise ScenarioError(f"no such file: {name_or_path}")
+        raise ScenarioError(f"unknown scenario {str(name_or_path)!r}; valid: {', '.join(scenario_names())} "
+                            "or a .toml path")
     with open(path, "rb") as stream:
         try:
             data = tomllib.load(stream)

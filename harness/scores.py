@@ -1,6 +1,7 @@
 """Scores of one run (SPEC section 7), on the recorded communication grid.
 
-Trapezoidal integration; ||e|| = sqrt(e^2 + de^2).  Pure functions of numpy
+Trapezoidal integration; ||e|| = sqrt(e^2 + de^2 + ...), the norm of the whole
+error vector (e, de, d2e, ... up to the plant's order; sqrt(e^2 + de^2) for the paper's plants).  Pure functions of numpy
 arrays so they can be tested on signals with known answers.
 """
 from __future__ import annotations
@@ -16,19 +17,22 @@ def trapezoid(values: np.ndarray, time: np.ndarray) -> float:
     return float(np.trapezoid(values, time)) if hasattr(np, "trapezoid") else float(np.trapz(values, time))
 
 
-def error_norm(e: np.ndarray, de: np.ndarray) -> np.ndarray:
-    """||e|| = sqrt(e^2 + de^2)."""
-    return np.hypot(e, de)
+def error_norm(e: np.ndarray, de: np.ndarray, *higher: np.ndarray) -> np.ndarray:
+    """||e|| = sqrt(e^2 + de^2 + d2e^2 + ...): the whole error vector (``higher`` = d2e, ...)."""
+    norm = np.hypot(e, de)
+    for derivative in higher:
+        norm = np.hypot(norm, derivative)
+    return norm
 
 
-def itae(time, e, de) -> float:
+def itae(time, e, de, *higher) -> float:
     """ITAE = int_0^T t ||e|| dt."""
-    return trapezoid(time * error_norm(e, de), time)
+    return trapezoid(time * error_norm(e, de, *higher), time)
 
 
-def iae(time, e, de) -> float:
+def iae(time, e, de, *higher) -> float:
     """IAE = int_0^T ||e|| dt."""
-    return trapezoid(error_norm(e, de), time)
+    return trapezoid(error_norm(e, de, *higher), time)
 
 
 def control_energy(time, u) -> float:
@@ -66,15 +70,15 @@ def total_variation_rate(time, u) -> float:
     return float(np.sum(np.abs(np.diff(u)))) / duration if duration > 0 else 0.0
 
 
-def score(time, e, de, ym, dym, u) -> dict:
-    """Every score of SPEC section 7 for one run."""
+def score(time, e, de, ym, dym, u, higher=()) -> dict:
+    """Every score of SPEC section 7 for one run; ``higher`` = (d2e, ...) for plants of order > 2."""
     es1, es2 = steady_state_errors(time, e, de, ym, dym)
     return {
         "ts": settling_time(time, e, ym),
         "es1_pct": es1,
         "es2_pct": es2,
-        "ITAE": itae(time, e, de),
-        "IAE": iae(time, e, de),
+        "ITAE": itae(time, e, de, *higher),
+        "IAE": iae(time, e, de, *higher),
         "Ec": control_energy(time, u),
         "umax": float(np.max(np.abs(u))),
         "tv_u": total_variation_rate(time, u),
@@ -83,5 +87,6 @@ def score(time, e, de, ym, dym, u) -> dict:
 
 def score_run(result) -> dict:
     """Scores of a master RunResult (full communication grid)."""
+    higher = tuple(result.role(role) for role in ("d2e", "d3e") if role in result.scenario.signals)
     return score(result.time, result.role("e"), result.role("de"), result.role("ym"),
-                 result.role("dym"), result.role("u"))
+                 result.role("dym"), result.role("u"), higher)

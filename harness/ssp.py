@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import copy
 import datetime
+import sys
 import zipfile
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
@@ -191,8 +192,10 @@ def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inp
 
 
 def export_command(args) -> int:
-    overrides = [(dotted, float(value)) for dotted, _, value in
-                 (assignment.partition("=") for assignment in args.set or [])]
+    from . import cli_args
+
+    overrides = list(args.set or [])
+    cli_args.check_assignments(scenarios.load(args.scenario), overrides)
     step, note = args.step, ""
     if step is None:  # the step a host that delays every link (Jacobi) needs for 1 %
         from .step_study import load_convergence, validated_step
@@ -201,7 +204,9 @@ def export_command(args) -> int:
         note = (f"; step {step:g} s, the Jacobi validated step (1 %) of docs/convergence.md" if step else
                 "; no Jacobi validated step in the study: the scenario's step")
     scenario = scenarios.configure(args.scenario, args.controller, step, args.stop, overrides)
-    out = args.out or f"{scenario.name}_{args.controller}.ssp"
+    out = args.out or str(Path("results") / f"{scenario.name}_{args.controller}.ssp")
+    for scenario_note in scenario.notes:  # e.g. the stop moved to a whole number of steps
+        print(f"note: {scenario_note}", file=sys.stderr)
     path = export_ssp(scenario, out, start_inputs=args.start_inputs)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB): {', '.join(scenario.components)}; "
           f"parameter set '{PARAMETER_SET}'"
@@ -210,16 +215,18 @@ def export_command(args) -> int:
 
 
 def register(commands):
+    from . import cli_args
+
     export = commands.add_parser("export-ssp", help="export a scenario as an SSP 1.0 package (SystemStructure.ssd, "
                                                     "parameter sets, FMUs)")
-    export.add_argument("scenario", help=f"scenario name ({', '.join(scenarios.scenario_names())}) or .toml path")
+    export.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
     export.add_argument("--controller", choices=tuple(scenarios.CONTROLLER_VARIANTS), default="vud")
-    export.add_argument("--out", help="the .ssp file to write (default: SCENARIO_CONTROLLER.ssp)")
-    export.add_argument("--step", type=float, help="communication step written to the package (default: the Jacobi "
-                                                   "validated step (1 %%) of the scenario and controller, "
-                                                   "docs/convergence.md)")
-    export.add_argument("--stop", type=float, help="stop time of the default experiment (default: the scenario's)")
-    export.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE",
+    export.add_argument("--out", help="the .ssp file to write (default: results/SCENARIO_CONTROLLER.ssp)")
+    export.add_argument("--step", type=cli_args.positive_float,
+                        help="communication step written to the package (default: the Jacobi validated step (1 %%) "
+                             "of the scenario and controller, docs/convergence.md)")
+    export.add_argument("--stop", type=cli_args.positive_float, help="stop time of the default experiment (default: the scenario's)")
+    export.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE", type=cli_args.assignment,
                         help="override a parameter value (repeatable), e.g. controller.gamma=290")
     export.add_argument("--start-inputs", action=argparse.BooleanOptionalAction, default=True,
                         help="also set the start values of the connected inputs to the consistent initial values "

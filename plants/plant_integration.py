@@ -83,3 +83,28 @@ def rk4_advance(derivative, t, x1, x2, u, step_size, max_internal_step, params):
         x1 = x1 + sixth * (a1 + 2.0 * (a2 + a3) + a4)
         x2 = x2 + sixth * (b1 + 2.0 * (b2 + b3) + b4)
     return x1, x2
+
+
+def rk4_advance_states(derivative, t, x, u, step_size, max_internal_step, params):
+    """Advance the state tuple ``x`` (any number of states) like :func:`rk4_advance`.
+
+    ``derivative(t, x, u, params) -> dx`` takes and returns tuples.  The same
+    scheme and step split as :func:`rk4_advance` (which stays the lean
+    2-state path of the pendulum and the manipulator); with a 2-state
+    derivative both give the same numbers bit for bit.
+    """
+    n = internal_step_count(step_size, max_internal_step)
+    if n == 0:
+        return tuple(x)
+    h = step_size / n
+    half = 0.5 * h
+    sixth = h / 6.0
+    for i in range(n):
+        ti = t + i * h
+        tm = ti + half
+        k1 = derivative(ti, x, u, params)
+        k2 = derivative(tm, tuple([a + half * b for a, b in zip(x, k1)]), u, params)
+        k3 = derivative(tm, tuple([a + half * b for a, b in zip(x, k2)]), u, params)
+        k4 = derivative(ti + h, tuple([a + h * b for a, b in zip(x, k3)]), u, params)
+        x = tuple([a + sixth * (b1 + 2.0 * (b2 + b3) + b4) for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4)])
+    return x

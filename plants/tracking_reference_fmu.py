@@ -1,5 +1,6 @@
 """TrackingReference: the reference ym(t) = amplitude sin(omega t) and the
-tracking errors e = ym - y, de = dym - dy as a co-simulation FMU.
+tracking errors e = ym - y, de = dym - dy (and d2e = ddym - d2y for a
+third-order plant) as a co-simulation FMU.
 
 SPEC.md sections 1, 6 and 9 (pendulum: amplitude pi/6, manipulator: 1;
 omega = 1 rad/s in both).
@@ -35,6 +36,10 @@ VARIABLES = (
     Variable("ddym", OUTPUT, 0.0, "rad/s2", "reference acceleration ddym = -A omega^2 sin(omega t)"),
     Variable("e", OUTPUT, 0.0, "rad", "tracking error e = ym - y", depends_on=("y",)),
     Variable("de", OUTPUT, 0.0, "rad/s", "tracking error rate de = dym - dy", depends_on=("dy",)),
+    # appended for third-order plants (value references above unchanged)
+    Variable("d2y", INPUT, 0.0, "rad/s2", "plant output acceleration d2y (third-order plants)"),
+    Variable("d2e", OUTPUT, 0.0, "rad/s2", "tracking error acceleration d2e = ddym - d2y",
+             depends_on=("d2y",)),
 )
 
 
@@ -51,9 +56,11 @@ class TrackingReference(Fmi2Slave):
         dym = amplitude * omega * _cos(phase)
         self.ym = ym
         self.dym = dym
-        self.ddym = -amplitude * omega * omega * s
+        ddym = -amplitude * omega * omega * s
+        self.ddym = ddym
         self.e = ym - self.y
         self.de = dym - self.dy
+        self.d2e = ddym - self.d2y
         self.outputs_stale = False
 
     def step(self, current_time, step_size):

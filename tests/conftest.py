@@ -1,5 +1,12 @@
-"""Shared fixtures: the FMUs are built once per test session (only if stale)."""
+"""Shared fixtures: the FMUs are built once per test session (only if stale).
+
+At the end of a session the summary lists what the session left in the temporary
+directory (pytest's own pytest-of-USER folder aside): a run should leave nothing.
+On a machine where other processes share the folder, their new entries appear too.
+"""
+import os
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -13,3 +20,27 @@ def fmu_paths():
     import build_fmu
 
     return build_fmu.ensure_built()
+
+
+_TEMP_BEFORE = set()
+
+
+def pytest_sessionstart(session):
+    _TEMP_BEFORE.update(os.listdir(tempfile.gettempdir()))
+
+
+def pytest_sessionfinish(session):
+    host = sys.modules.get("tests.plain_fmpy_host")
+    if host is not None:
+        host.remove_extractions()
+
+
+def pytest_terminal_summary(terminalreporter):
+    folder = tempfile.gettempdir()
+    left = sorted(name for name in set(os.listdir(folder)) - _TEMP_BEFORE if not name.startswith("pytest-of-"))
+    if left:
+        shown = ", ".join(left[:20]) + (f" and {len(left) - 20} more" if len(left) > 20 else "")
+        terminalreporter.write_line(f"temp directory {folder}: {len(left)} new entries since the session started "
+                                    f"(left by this run, or by other processes): {shown}", yellow=True)
+    else:
+        terminalreporter.write_line(f"temp directory {folder}: nothing left behind by this run")

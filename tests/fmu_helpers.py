@@ -1,4 +1,7 @@
 """Small helpers for driving one FMU through fmpy's low-level API in tests."""
+import shutil
+import weakref
+
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 from fmpy.fmi2 import defaultCallbacks
@@ -10,6 +13,9 @@ class Driven:
     def __init__(self, path, instance_name="instance", unzip_dir=None, logging_on=True):
         self.md = read_model_description(str(path))
         self.unzip_dir = unzip_dir or extract(str(path))
+        # an extraction of its own is removed by free(), else when the helper is forgotten or at exit
+        self._remove_extraction = (weakref.finalize(self, shutil.rmtree, self.unzip_dir, True)
+                                   if unzip_dir is None else None)
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.types = {v.name: v.type for v in self.md.modelVariables}
         self.messages = []
@@ -55,3 +61,5 @@ class Driven:
         except Exception:
             pass
         self.slave.freeInstance()
+        if self._remove_extraction is not None:
+            self._remove_extraction()

@@ -15,6 +15,9 @@ The scenario (harness/scenarios) gives only the FMUs, parameters and connections
 """
 from __future__ import annotations
 
+import atexit
+import shutil
+
 import numpy as np
 
 from harness.scores import score
@@ -23,6 +26,12 @@ from fmpy import extract
 from tests.fmu_helpers import Driven
 
 _UNZIPPED = {}  # FMU path -> its extracted folder, shared by the instances of a test session
+
+
+def remove_extractions():
+    """Remove the extracted folders (the test session calls this when it ends)."""
+    while _UNZIPPED:
+        shutil.rmtree(_UNZIPPED.popitem()[1], ignore_errors=True)
 
 
 def run(scenario, fmu_paths: dict, algorithm: str = "jacobi", order: tuple = (), stop: float | None = None,
@@ -37,6 +46,7 @@ def run(scenario, fmu_paths: dict, algorithm: str = "jacobi", order: tuple = (),
             path = str(fmu_paths[spec.fmu])
             if path not in _UNZIPPED:
                 _UNZIPPED[path] = extract(path)
+                atexit.register(remove_extractions)  # leave no extraction behind (conftest: at session end)
             unit = Driven(path, instance_name=name, unzip_dir=_UNZIPPED[path])
             units[name] = unit
             parameters = dict(spec.parameters, **(overrides or {}).get(name, {}))

@@ -16,7 +16,8 @@ def test_bench_json_reports_every_figure_and_times_the_right_runs(fmu_paths, cap
     assert figures["steps"] == round(STOP / figures["step"]) and figures["step"] == STEP
     for key in ("ours_feedthrough_us", "ours_feedthrough_whole_us", "ours_jacobi_us", "ours_jacobi_whole_us",
                 "floor_us", "oracle_us", "real_time_factor", "floor_ratio_to_ours", "oracle_ratio_to_ours",
-                "ours_jacobi_ratio_to_ours", "target_floor_plus_oracle_x1_5_us"):
+                "ours_jacobi_ratio_to_ours", "target_floor_plus_oracle_x1_5_us",
+                *(f"fmu_{name}{kind}_us" for name in ("plant", "reference", "controller") for kind in ("", "_null"))):
         value = figures[key]
         assert isinstance(value, float) and math.isfinite(value) and value > 0, (key, value)
     ours = figures["ours_feedthrough_us"]

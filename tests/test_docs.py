@@ -1,19 +1,81 @@
-"""The README's variable tables come from the FMUs' declaration tables and stay in sync."""
+"""The documentation stands on its own: generated tables are current, links stay in the repository."""
+import re
 from pathlib import Path
 
 import build_fmu
 
 ROOT = Path(__file__).resolve().parents[1]
+MODEL = ROOT / "docs" / "model.md"
+LINK = re.compile(r"\]\(([^)\s]+)\)")
 
 
-def test_readme_variable_tables_are_generated_from_the_declarations():
+def test_model_doc_variable_tables_are_generated_from_the_declarations():
+    text = MODEL.read_text()
+    assert build_fmu.with_variable_tables(text) == text, "run: python build_fmu.py --docs"
+
+
+def test_the_tables_cover_every_fmu_and_every_declared_variable():
+    tables = build_fmu.variable_tables()
+    for fmu in build_fmu.FMUS:
+        assert f"### `{fmu.model_identifier}`" in tables
+        for variable in build_fmu.model_class(fmu.model_identifier).VARIABLES:
+            assert f"| `{variable.name}` |" in tables
+
+
+def test_readme_points_to_the_model_doc_and_holds_no_copy_of_the_tables():
     readme = (ROOT / "README.md").read_text()
-    assert build_fmu.readme_with_tables(readme) == readme, "run: python build_fmu.py --readme"
+    assert "](docs/model.md" in readme
+    assert build_fmu.TABLES_BEGIN not in readme and "| name | causality |" not in readme
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a heading."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def _markdown_files():
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def test_every_link_of_the_docs_resolves_inside_the_repository():
+    """No link leaves the repository (no ../shared): a clone must need nothing outside it."""
+    for document in _markdown_files():
+        text = document.read_text()
+        assert "../shared" not in text and "SPEC.md" not in text, f"{document.name} refers outside the repository"
+        for target in LINK.findall(text):
+            if target.startswith(("http://", "https://", "mailto:")):
+                continue
+            path_part, _, anchor = target.partition("#")
+            path = (document.parent / path_part).resolve() if path_part else document
+            assert path.is_relative_to(ROOT), f"{document.name}: link {target} leaves the repository"
+            assert path.exists(), f"{document.name}: link {target} points to a missing file"
+            if anchor and path.suffix == ".md":
+                anchors = {_slug(h) for h in re.findall(r"(?m)^#+ (.+)$", path.read_text())}
+                assert anchor in anchors, f"{document.name}: link {target}: no heading with that anchor"
+
+
+def test_model_doc_numbers_every_equation_of_the_paper():
+    text = MODEL.read_text()
+    for number in range(1, 40):  # the paper numbers its equations (1) to (39)
+        assert re.search(rf"\({number}\)|\(\d+\)-\({number}\)|\({number}\)-\(\d+\)", text) or \
+            any(int(a) <= number <= int(b) for a, b in re.findall(r"\((\d+)\)-\((\d+)\)", text)), \
+            f"docs/model.md does not mention equation ({number})"
 
 
 def test_readme_starts_with_the_two_commands():
     lines = (ROOT / "README.md").read_text().splitlines()
-    commands = [line for line in lines[:8] if line.startswith("pip install")]
+    commands = [line for line in lines[:20] if line.startswith("pip install")]
     assert commands[0].startswith("pip install -e . && python -m harness tables")
     assert commands[1].startswith("pip install -e '.[test]' && python -m pytest")
     assert "pip install -e '.[test]' && python -m pytest -q" in (ROOT / ".ci" / "run").read_text()
+
+
+def test_model_doc_scenario_table_matches_the_scenario_files():
+    from harness import scenario as scenarios
+
+    rows = re.findall(r"(?m)^\| `(\w+)` \| [^|]+ \| [^|]+ \| ([0-9.e-]+) \| [^|]+ \|$", MODEL.read_text())
+    assert sorted(name for name, _ in rows) == scenarios.scenario_names()
+    for name, step in rows:
+        configured = scenarios.load(name)
+        assert float(step) == configured.step, f"docs/model.md: {name} step {step}, scenario file {configured.step}"
+        assert configured.start == 0.0 and configured.stop == 20.0  # "All run from 0 to 20 s"

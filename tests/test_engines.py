@@ -219,7 +219,9 @@ def test_a_host_that_is_not_python_needs_libpython_preloaded(packages, tmp_path)
     shutil.copy(os.path.join(os.path.dirname(ecospy.__file__), "binaries", "ecos"), executable)
     executable.chmod(executable.stat().st_mode | stat.S_IXUSR)
     libpython = os.path.join(sysconfig.get_config_var("LIBDIR"), sysconfig.get_config_var("INSTSONAME"))
-    environment = dict(os.environ, LD_LIBRARY_PATH=os.path.dirname(engines.load_tbb()._name))
+    scratch = tmp_path / "temp"  # Ecos leaves the SSP and FMUs it unpacks in TMPDIR: keep them in tmp_path
+    scratch.mkdir()
+    environment = dict(os.environ, LD_LIBRARY_PATH=os.path.dirname(engines.load_tbb()._name), TMPDIR=str(scratch))
     command = [str(executable), "simulate", "--path", str(packages[True]), "--stopTime", "0.002", "--stepSize",
                "1e-4", "--parameterSet", "initialValues", "--noParallel", "--logLevel", "warn"]
     bare = subprocess.run(command, cwd=tmp_path, env=environment, capture_output=True, timeout=120)

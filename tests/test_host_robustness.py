@@ -106,13 +106,13 @@ def test_reference_jump_after_the_start_does_not_relatch(fmu_paths):
         c.slave.doStep(k * h, h)
     t = 30 * h
     c.set(e=1.2, de=4.0)  # the reference jumps at t > 0
-    expected = afc_math.modified_error(1.2, 4.0, t, 0.3, -0.5, 5.0)
+    expected = afc_math.modified_error((1.2, 4.0), t, (0.3, -0.5), 0.0, 5.0)
     assert c.get("E", "dE") == [pytest.approx(v, abs=1e-14) for v in expected]
     for k in range(30, 60):
         c.slave.doStep(k * h, h)
         c.set(e=1.2 + 0.01 * (k % 2), de=0.0)
     c.set(e=1.2, de=4.0)
-    expected = afc_math.modified_error(1.2, 4.0, 60 * h, 0.3, -0.5, 5.0)  # still the latch of t = 0
+    expected = afc_math.modified_error((1.2, 4.0), 60 * h, (0.3, -0.5), 0.0, 5.0)  # still the latch of t = 0
     assert c.get("E", "dE") == [pytest.approx(v, abs=1e-14) for v in expected]
     assert c.messages == []
     c.free()
@@ -133,7 +133,7 @@ def test_relatch_restarts_adaptation_and_moves_the_time_origin(fmu_paths):
     assert c.get("theta1", "theta2", "theta3", "theta4") == [theta0] * 4
     t3, later = 4 * h, dict(e=-0.26 + 0.52 * h, de=0.52)
     c.set(**later)
-    expected = afc_math.modified_error(later["e"], later["de"], t3 - t2, true["e"], true["de"], 5.0)
+    expected = afc_math.modified_error((later["e"], later["de"]), t3, (true["e"], true["de"]), t2, 5.0)
     assert c.get("E", "dE") == [pytest.approx(v, rel=1e-12) for v in expected]
     c.slave.doStep(t3, h)  # a consistent pair: decided, one warning naming both latches
     (warning,) = warnings_of({"c": c.messages}, "c")

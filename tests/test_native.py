@@ -412,13 +412,13 @@ def test_native_life_cycle_rules(native):
 
 
 # ------------------------------------------------------------------ FMI 3.0
-def test_the_fmi3_controller_matches_the_fmi2_one(native):
+def test_the_fmi3_controller_matches_the_fmi2_one(native, tmp_path):
     from fmpy.fmi3 import FMU3Slave
 
     path = native["AdaptiveFuzzyController"][3]
     md = read_model_description(str(path))
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    slave = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(path)),
+    slave = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(path), str(tmp_path / "fmi3")),
                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName="fmi3")
     slave.instantiate()
     try:

@@ -31,10 +31,10 @@ RTOL, ATOL = 1e-10, 1e-12  # solve_ivp reference tolerances
 
 # ----------------------------------------------------------------- helpers
 @pytest.fixture(scope="session")
-def plant_fmus():
-    """{model identifier: (path, unzip directory)}; built once, only if stale."""
+def plant_fmus(tmp_path_factory):
+    """{model identifier: (path, unzip directory)}; built once, only if stale; extracted into pytest's tmp."""
     paths = build_fmu.ensure_built()
-    return {name: (paths[name], extract(str(paths[name]))) for name in PLANTS}
+    return {name: (paths[name], extract(str(paths[name]), str(tmp_path_factory.mktemp(name)))) for name in PLANTS}
 
 
 class Instance(Driven):
@@ -355,7 +355,8 @@ def test_model_structure_declares_the_true_dependencies(plant_fmus):
     expected = {
         "InvertedPendulum": {"y": [], "dy": [], "d": []},
         "Manipulator": {"y": [], "dy": [], "d": [], "mr": []},
-        "TrackingReference": {"ym": [], "dym": [], "ddym": [], "e": ["y"], "de": ["dy"]},
+        "TrackingReference": {"ym": [], "dym": [], "ddym": [], "e": ["y"], "de": ["dy"], "d2e": ["d2y"]},
+        "DcMotorArm": {"y": [], "dy": [], "d2y": [], "i": []},
     }
     for name, (path, _) in plant_fmus.items():
         md = read_model_description(str(path))

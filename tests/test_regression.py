@@ -14,7 +14,7 @@ from harness import regression
 from harness.cli import main as cli_main
 from harness.regression import Case, CaseRun
 
-MUTATION = Case("pendulum_case1", "vud", (("controller.gamma", 290.0),))
+MUTATION = Case("pendulum_case1", "vud", overrides=(("controller.gamma", 290.0),))
 
 
 @pytest.fixture(scope="session")
@@ -27,11 +27,14 @@ def regression_runs(fmu_paths):
 
 def test_all_twelve_cases_stay_inside_their_reference_tubes(regression_runs, tmp_path):
     cases = regression.all_cases()
-    assert len(cases) == 12
+    paper = {(n, c) for n in ("pendulum_case1", "pendulum_case2", "pendulum_case3", "manipulator")
+             for c in ("vud", "fixed", "fae")}
+    assert paper <= {(c.scenario, c.controller) for c in cases}
+    assert len(cases) == 15  # the paper's 12 and the third-order plant's 3 (motor_arm, issue 17)
     outcome = regression.regress(cases, runs=[regression_runs[c] for c in cases], report_dir=tmp_path)
     table = "\n".join(" | ".join(map(str, row)) for row in regression.summary_rows(outcome.comparisons))
     assert outcome.passed, f"regression failed (see {tmp_path / 'report.md'}):\n{table}"
-    assert "12/12 cases pass" in (tmp_path / "report.md").read_text()
+    assert "15/15 cases pass" in (tmp_path / "report.md").read_text()
 
 
 def test_gamma_290_instead_of_300_fails_and_the_unchanged_case_passes(regression_runs, tmp_path):

@@ -32,3 +32,10 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys):
         assert (tmp_path / f"{name}.png").stat().st_size > 10_000
         assert f"({name}.png)" in report
     assert "claims (decided on the step ladders" in out
+    with open(tmp_path / "table3_beyond_paper.csv") as stream:  # the third-order plant (issue 17)
+        beyond = list(csv.DictReader(stream))
+    assert sorted((r["controller"], r["sets"]) for r in beyond) == sorted(
+        (c, m) for c in ("vud", "fixed", "fae") for m in ("2", "3"))
+    assert all(r["scenario"] == "motor_arm" and r["status"] == "ok" and float(r["ITAE"]) > 0 for r in beyond)
+    assert "## Beyond the paper: a third-order plant" in report and "| vud | 3 (27) |" in report
+

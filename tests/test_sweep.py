@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness import sweep
+from harness import sweep, sweep_csv, sweep_executors, sweep_grid, sweep_heatmap
 from harness.cli import main as cli_main
 from harness.scenario import ScenarioError
 
@@ -36,14 +36,14 @@ def rows_of(path):
 
 # ------------------------------------------------------------------ grids
 def test_grid_syntax():
-    assert sweep.parse_grid("plant.mp=0.1:2:5").values == tuple(np.linspace(0.1, 2, 5))
-    assert sweep.parse_grid("step=1e-4:1e-2:3:log").values == pytest.approx((1e-4, 1e-3, 1e-2))
-    assert sweep.parse_grid("controller.kappa1=1, 10,10,100").values == (1.0, 10.0, 100.0)
-    assert sweep.parse_grid("plant.mp=0.5:0.5:1").values == (0.5,)
+    assert sweep_grid.parse_grid("plant.mp=0.1:2:5").values == tuple(np.linspace(0.1, 2, 5))
+    assert sweep_grid.parse_grid("step=1e-4:1e-2:3:log").values == pytest.approx((1e-4, 1e-3, 1e-2))
+    assert sweep_grid.parse_grid("controller.kappa1=1, 10,10,100").values == (1.0, 10.0, 100.0)
+    assert sweep_grid.parse_grid("plant.mp=0.5:0.5:1").values == (0.5,)
     for bad in ["plant.mp", "plant.mp=1:2", "plant.mp=1:2:0", "plant.mp=a:2:3", "plant.mp=0:1:3:log",
                 "=1:2:3", "plant.mp=1:2:3:lin", "plant.mp=nan"]:
         with pytest.raises(ScenarioError, match="grid"):
-            sweep.parse_grid(bad)
+            sweep_grid.parse_grid(bad)
 
 
 @pytest.mark.parametrize("grids,expected", [
@@ -58,7 +58,7 @@ def test_grid_syntax():
 ])
 def test_grid_names_and_values_are_validated_before_anything_runs(fmu_paths, grids, expected):
     with pytest.raises(ScenarioError) as error:
-        sweep.plan_sweep("pendulum_case1", ("vud",), [sweep.parse_grid(g) for g in grids], fmu_paths=fmu_paths)
+        sweep_grid.plan_sweep("pendulum_case1", ("vud",), [sweep_grid.parse_grid(g) for g in grids], fmu_paths=fmu_paths)
     assert expected in str(error.value)
 
 
@@ -70,8 +70,8 @@ def test_cli_reports_a_bad_grid_name_as_one_clear_error(fmu_paths, tmp_path, cap
 
 
 def test_grid_over_step_and_integer_parameters_is_accepted(fmu_paths):
-    plan = sweep.plan_sweep("pendulum_case1", ("vud", "fae"), [sweep.parse_grid("step=1e-3,2e-3"),
-                                                               sweep.parse_grid("controller.fls_input=1,2")],
+    plan = sweep_grid.plan_sweep("pendulum_case1", ("vud", "fae"), [sweep_grid.parse_grid("step=1e-3,2e-3"),
+                                                               sweep_grid.parse_grid("controller.fls_input=1,2")],
                             stop=0.1, fmu_paths=fmu_paths)
     assert len(plan.points()) == 8
     assert plan.points()[:2] == [("vud", (1e-3, 1.0)), ("fae", (1e-3, 1.0))]
@@ -112,24 +112,31 @@ def test_local_pool_sweep_records_every_point_with_scores_or_a_reason(fmu_paths,
     assert (out / "heatmap_ITAE.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_dask_cluster_gives_the_same_rows_as_the_local_pool(fmu_paths, local_sweep, tmp_path):
+def test_dask_cluster_gives_the_same_rows_as_the_local_pool(fmu_paths, local_sweep, tmp_path, monkeypatch):
     distributed = pytest.importorskip("distributed")
+    import dask
+
     out, _ = local_sweep
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None) as cluster:
+    scratch = tmp_path / "temp"  # the workers' FMU cache and Dask's scratch space, removed with tmp_path
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))
+    with dask.config.set({"temporary-directory": str(scratch)}), \
+            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                     dashboard_address=None) as cluster:
         assert cli_main(["sweep", *SMALL, "--out", str(tmp_path), "--scheduler", cluster.scheduler_address]) == 0
     assert rows_of(tmp_path / "sweep.csv") == rows_of(out / "sweep.csv")  # scores bit-identical
+    assert (scratch / "afc-sweep-fmus").is_dir()  # the workers cached the FMUs here, not in the real temp folder
 
 
 def test_unreachable_scheduler_is_a_clear_error(fmu_paths, tmp_path, capsys, monkeypatch):
     pytest.importorskip("distributed")
-    monkeypatch.setattr(sweep, "SCHEDULER_TIMEOUT", "1s")
+    monkeypatch.setattr(sweep_executors, "SCHEDULER_TIMEOUT", "1s")
     code = cli_main(["sweep", *SMALL, "--out", str(tmp_path), "--scheduler", "tcp://127.0.0.1:9"])
     assert code == 2 and "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'" in capsys.readouterr().err
 
 
 def test_failed_points_are_recorded_and_the_sweep_goes_on(fmu_paths, tmp_path):
-    plan = sweep.plan_sweep("pendulum_case1", ("fixed",), [sweep.parse_grid("controller.lambda_ce=0.99,1.0")],
+    plan = sweep_grid.plan_sweep("pendulum_case1", ("fixed",), [sweep_grid.parse_grid("controller.lambda_ce=0.99,1.0")],
                             stop=0.1, step=1e-3, fmu_paths=fmu_paths)
     summary = sweep.run_sweep(plan, tmp_path, jobs=1, progress=False)
     assert summary.counts["fixed"] == {"ok": 1, "diverged": 0, "failed": 1}
@@ -141,16 +148,16 @@ def crash_on_heavy_payload(task):
     """A worker that dies (as on a crash inside an FMU) on the points with mp > 0.5."""
     if task["values"][0] > 0.5:
         os._exit(3)
-    return sweep.run_point(task)
+    return sweep_executors.run_point(task)
 
 
 def test_a_lost_worker_loses_points_not_the_sweep_and_resume_runs_them(fmu_paths, tmp_path):
-    plan = sweep.plan_sweep("pendulum_case1", ("vud",), [sweep.parse_grid("plant.mp=0.1,1")],
+    plan = sweep_grid.plan_sweep("pendulum_case1", ("vud",), [sweep_grid.parse_grid("plant.mp=0.1,1")],
                             stop=0.1, step=1e-3, fmu_paths=fmu_paths)
     first = sweep.run_sweep(plan, tmp_path, jobs=1, progress=False, point_function=crash_on_heavy_payload)
     assert first.lost >= 1 and "BrokenProcessPool" in first.lost_reason
     assert first.computed + first.lost == 2
-    rows = sweep.read_rows(tmp_path / "sweep.csv", plan.names)
+    rows = sweep_csv.read_rows(tmp_path / "sweep.csv", plan.names)
     assert all(row["values"] == [0.1] for row in rows)  # a lost point leaves no row behind
     second = sweep.run_sweep(plan, tmp_path, jobs=1, progress=False)
     assert (second.done_before, second.computed, second.lost) == (first.computed, 2 - first.computed, 0)
@@ -163,9 +170,11 @@ KILLED = ["pendulum_case2", "--controller", "vud", "--grid", "plant.mp=0.1:1:4",
 
 def test_a_killed_sweep_resumes_without_recomputing_finished_points(fmu_paths, tmp_path):
     csv_path = tmp_path / "sweep.csv"
+    scratch = tmp_path / "temp"  # a killed run cannot clean up: its FMU extractions stay in tmp_path
+    scratch.mkdir()
     process = subprocess.Popen([sys.executable, "-m", "harness", "sweep", *KILLED, "--out", str(tmp_path)],
                                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                               start_new_session=True)
+                               start_new_session=True, env=dict(os.environ, TMPDIR=str(scratch)))
     deadline = time.monotonic() + 60
     try:
         while time.monotonic() < deadline and process.poll() is None:
@@ -180,8 +189,8 @@ def test_a_killed_sweep_resumes_without_recomputing_finished_points(fmu_paths, t
     assert 2 <= len(before) < 8
     lines_before = csv_path.read_text().splitlines()
 
-    plan = sweep.plan_sweep("pendulum_case2", ("vud",), [sweep.parse_grid("plant.mp=0.1:1:4"),
-                                                         sweep.parse_grid("plant.dist_gain=0:2:2")],
+    plan = sweep_grid.plan_sweep("pendulum_case2", ("vud",), [sweep_grid.parse_grid("plant.mp=0.1:1:4"),
+                                                         sweep_grid.parse_grid("plant.dist_gain=0:2:2")],
                             stop=3, step=1e-3, fmu_paths=fmu_paths)
     summary = sweep.run_sweep(plan, tmp_path, jobs=2, progress=False, plot=False)
     assert (summary.done_before, summary.computed, summary.total) == (len(before), 8 - len(before), 8)
@@ -195,7 +204,7 @@ def test_a_killed_sweep_resumes_without_recomputing_finished_points(fmu_paths, t
 
 
 def test_an_interrupted_sweep_stops_cleanly_and_resumes(fmu_paths, tmp_path):
-    plan = sweep.plan_sweep("pendulum_case1", ("vud", "fixed"), [sweep.parse_grid("plant.mp=0.1:1:3")],
+    plan = sweep_grid.plan_sweep("pendulum_case1", ("vud", "fixed"), [sweep_grid.parse_grid("plant.mp=0.1:1:3")],
                             stop=0.3, step=1e-3, fmu_paths=fmu_paths)
 
     def interrupt(row, done):
@@ -211,17 +220,17 @@ def test_an_interrupted_sweep_stops_cleanly_and_resumes(fmu_paths, tmp_path):
 
 def test_resume_drops_a_row_cut_short_and_refuses_other_settings(fmu_paths, tmp_path):
     names = ["plant.mp"]
-    row = {"controller": "vud", "values": [0.1], "scores": {k: 1.5 for k in sweep.SCORE_KEYS}, "wall_s": 0.25,
+    row = {"controller": "vud", "values": [0.1], "scores": {k: 1.5 for k in sweep_csv.SCORE_KEYS}, "wall_s": 0.25,
            "status": "ok", "reason": ""}
-    sink = sweep.CsvSink(tmp_path / "sweep.csv", names, [])
+    sink = sweep_csv.CsvSink(tmp_path / "sweep.csv", names, [])
     sink.write(row)
     sink.close()
     with open(tmp_path / "sweep.csv", "a") as stream:
         stream.write("vud,0.2,1.0,2.0")  # killed while writing
-    assert sweep.read_rows(tmp_path / "sweep.csv", names) == [row]
+    assert sweep_csv.read_rows(tmp_path / "sweep.csv", names) == [row]
     with pytest.raises(ScenarioError, match="holds a sweep over plant.mp, not over plant.dist_gain"):
-        sweep.read_rows(tmp_path / "sweep.csv", ["plant.dist_gain"])
-    plan = sweep.plan_sweep("pendulum_case1", ("vud",), [sweep.parse_grid("plant.mp=0.1,0.2")], stop=0.1,
+        sweep_csv.read_rows(tmp_path / "sweep.csv", ["plant.dist_gain"])
+    plan = sweep_grid.plan_sweep("pendulum_case1", ("vud",), [sweep_grid.parse_grid("plant.mp=0.1,0.2")], stop=0.1,
                             step=1e-3, fmu_paths=fmu_paths)
     (tmp_path / "sweep.json").write_text('{"scenario": "pendulum_case1", "stop": 0.2}')
     with pytest.raises(ScenarioError, match=r"other settings \(stop: 0.2 then, 0.1 now\)"):
@@ -230,7 +239,7 @@ def test_resume_drops_a_row_cut_short_and_refuses_other_settings(fmu_paths, tmp_
 
 # ------------------------------------------------------------------ heat map
 def test_heat_map_takes_the_worst_case_over_further_axes_and_marks_failures(fmu_paths, tmp_path):
-    plan = sweep.plan_sweep("pendulum_case1", ("vud", "fae"), [sweep.parse_grid(g) for g in
+    plan = sweep_grid.plan_sweep("pendulum_case1", ("vud", "fae"), [sweep_grid.parse_grid(g) for g in
                             ("plant.mp=0.1,1", "plant.dist_gain=0,1", "controller.kappa1=1,10")],
                             stop=0.1, step=1e-3, fmu_paths=fmu_paths)
 
@@ -241,8 +250,8 @@ def test_heat_map_takes_the_worst_case_over_further_axes_and_marks_failures(fmu_
     rows = [row("vud", [0.1, 0, 1], "ok", 0.5), row("vud", [0.1, 0, 10], "ok", 2.0),
             row("vud", [1, 0, 1], "ok", 0.1), row("vud", [1, 0, 10], "diverged", 0),
             row("vud", [0.1, 1, 1], "failed", 0), row("fae", [1, 1, 10], "ok", 30.0)]
-    metric, status = sweep.heatmap_arrays(plan, rows, "vud")
+    metric, status = sweep_heatmap.heatmap_arrays(plan, rows, "vud")
     assert status.tolist() == [[1, 2], [3, 0]]  # rows: dist_gain 0, 1; columns: mp 0.1, 1
     assert metric[0, 0] == 2.0 and math.isnan(metric[0, 1])
-    path = sweep.plot_heatmap(plan, rows, tmp_path / "map.png")
+    path = sweep_heatmap.plot_heatmap(plan, rows, tmp_path / "map.png")
     assert path.stat().st_size > 1000

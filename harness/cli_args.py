@@ -1,0 +1,304 @@
+"""Command-line argument types and checks shared by every subcommand.
+
+Every mistake on the command line becomes one line that names the culprit and the valid range or
+choices (``error: argument --step: 'abc' is not a number; give a finite number > 0``) and exit
+status 2; a run that fails becomes one line and exit status 1.  No traceback reaches a user:
+:func:`one_line` turns any exception into a line, :func:`exit_status` picks 2 or 1.
+
+The types are plain functions for ``add_argument(type=...)``: argparse reports their
+``ArgumentTypeError`` as ``argument --NAME: MESSAGE``.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+import zipfile
+from pathlib import Path
+
+USAGE_EXIT = 2  # a mistake in the command line or in a scenario file
+FAILED_EXIT = 1  # the command ran and failed (a diverged or crashed run, a failing regression)
+
+
+class UsageError(ValueError):
+    """A mistake on the command line that argparse's types cannot see alone (exit status 2)."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with one line per usage error (no usage block), exit status 2."""
+
+    def error(self, message):
+        hint = f" (see {self.prog} --help)"
+        self.exit(USAGE_EXIT, f"{self.prog}: error: {message}{hint}\n")
+
+
+# ------------------------------------------------------------------ numbers
+def _finite(text: str, wanted: str) -> float:
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number; give {wanted}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not finite; give {wanted}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """A finite number > 0 (a step, a stop time, an interval, a limit)."""
+    value = _finite(text, "a finite number > 0")
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{text} is invalid; give a finite number > 0")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """A finite number >= 0 (a tolerance)."""
+    value = _finite(text, "a finite number >= 0")
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text} is invalid; give a finite number >= 0")
+    return value
+
+
+def _integer(text: str, low: int) -> int:
+    wanted = f"a whole number >= {low}"
+    try:
+        value = int(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number; give {wanted}") from None
+    if value < low:
+        raise argparse.ArgumentTypeError(f"{text} is invalid; give {wanted}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """A whole number >= 1 (processes, repetitions)."""
+    return _integer(text, 1)
+
+
+def non_negative_int(text: str) -> int:
+    """A whole number >= 0 (steps to skip)."""
+    return _integer(text, 0)
+
+
+# ------------------------------------------------------------------- files
+def existing_file(text: str) -> Path:
+    path = Path(text)
+    if not path.exists():
+        raise argparse.ArgumentTypeError(f"no such file: {text}")
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text} is not a file")
+    return path
+
+
+def ssp_file(text: str) -> Path:
+    """An existing SSP package (a zip file holding SystemStructure.ssd)."""
+    path = existing_file(text)
+    if not zipfile.is_zipfile(path):
+        raise argparse.ArgumentTypeError(f"{text} is not an SSP package (not a zip file); "
+                                         "write one with: python -m harness export-ssp SCENARIO --out FILE.ssp")
+    with zipfile.ZipFile(path) as package:
+        if "SystemStructure.ssd" not in package.namelist():
+            raise argparse.ArgumentTypeError(f"{text} is not an SSP package (no SystemStructure.ssd inside)")
+    return path
+
+
+def scenario(text: str) -> str:
+    """A scenario name of harness/scenarios/ or the path of an existing .toml file."""
+    from . import scenario as scenarios
+
+    if text.endswith(".toml") or "/" in text or "\\" in text:
+        path = Path(text)
+        if not path.exists():
+            raise argparse.ArgumentTypeError(f"no such file: {text}")
+        if path.suffix != ".toml" or not path.is_file():
+            raise argparse.ArgumentTypeError(f"{text} is not a scenario file (.toml)")
+        return text
+    names = scenarios.scenario_names()
+    if text not in names:
+        raise argparse.ArgumentTypeError(f"unknown scenario {text!r}; valid: {', '.join(names)} or a .toml path")
+    return text
+
+
+def scenario_help() -> str:
+    from . import scenario as scenarios
+
+    return f"scenario name ({', '.join(scenarios.scenario_names())}) or .toml path"
+
+
+# ------------------------------------------------------------ --set values
+def assignment(text: str) -> tuple:
+    """``INSTANCE.PARAMETER=VALUE`` with a finite number: ``(dotted, value)``."""
+    dotted, equals, value = text.partition("=")
+    dotted = dotted.strip()
+    instance, dot, parameter = dotted.partition(".")
+    if not equals or not dot or not instance or not parameter or not value.strip():
+        raise argparse.ArgumentTypeError(f"{text!r}: write INSTANCE.PARAMETER=VALUE, e.g. controller.gamma=290")
+    return dotted, _finite(value.strip(), f"a finite number for {dotted}")
+
+
+def check_assignments(configured, assignments, fmu_paths: dict | None = None, option: str = "--set"):
+    """Check ``--set`` names and values against the scenario and the FMUs' model descriptions.
+
+    Unknown instance, unknown or non-parameter variable, a fraction for an Integer, and a value
+    outside an inclusive min/max declared in the modelDescription raise UsageError naming the
+    valid choices; an exclusive bound (e.g. gamma > 0) is checked by the FMU itself when
+    initialisation ends, and :func:`one_line` reports that as a usage error too.
+    """
+    from .fmi import ModelInfo
+    from .master import resolve_fmu
+
+    infos = {}
+    for dotted, value in assignments:
+        instance, _, parameter = dotted.partition(".")
+        if instance not in configured.components:
+            raise UsageError(f"{option} {dotted}={value:g}: unknown instance {instance!r}; "
+                             f"valid: {', '.join(configured.components)}")
+        if instance not in infos:
+            spec = configured.components[instance]
+            infos[instance] = ModelInfo.read(resolve_fmu(spec.fmu, configured, fmu_paths))
+        variables = infos[instance].variables
+        parameters = [name for name, v in variables.items() if v.causality == "parameter"]
+        found = variables.get(parameter)
+        if found is None or found.causality != "parameter":
+            raise UsageError(f"{option} {dotted}={value:g}: {instance} has no parameter {parameter!r}; "
+                             f"valid: {', '.join(parameters)}")
+        if found.type == "Integer" and value != int(value):
+            raise UsageError(f"{option} {dotted}={value:g}: {parameter} is an Integer; give a whole number")
+        low = float(found.min) if found.min not in (None, "") else None
+        high = float(found.max) if found.max not in (None, "") else None
+        if (low is not None and value < low) or (high is not None and value > high):
+            valid = " and ".join(part for part in (f">= {low:g}" if low is not None else "",
+                                                    f"<= {high:g}" if high is not None else "") if part)
+            raise UsageError(f"{option} {dotted}={value:g} is out of range; valid: {valid}")
+    if assignments:  # ranges the model description cannot state (e.g. gamma > 0): the FMUs say at initialisation
+        _initialise_once(configured, assignments, fmu_paths, option)
+
+
+def _initialise_once(configured, assignments, fmu_paths, option):
+    """Run one communication step with the new values; a parameter the FMU rejects is a usage error."""
+    from .master import SimulationFailed, simulate
+
+    trial = configured
+    for dotted, value in assignments:
+        trial = trial.with_parameter(dotted, value)
+    trial = trial.with_parameter("stop", trial.start + trial.step)
+    try:
+        simulate(trial, fmu_paths=fmu_paths)
+    except SimulationFailed as failure:
+        if exit_status(failure) == USAGE_EXIT:
+            raise UsageError(f"{option}: {one_line(failure)}") from None
+
+
+# ------------------------------------------------------ committed files
+def tracked_files(paths) -> list:
+    """Those of ``paths`` that the project's git repository tracks (none without git or outside it)."""
+    import shutil
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    if shutil.which("git") is None or not (root / ".git").exists():
+        return []
+    inside = []
+    for path in paths:
+        resolved = Path(path).resolve()
+        if resolved.is_relative_to(root):
+            inside.append(str(resolved.relative_to(root)))
+    if not inside:
+        return []
+    completed = subprocess.run(["git", "ls-files", "--", *inside], cwd=root, capture_output=True, text=True)
+    return sorted(completed.stdout.split()) if completed.returncode == 0 else []
+
+
+def refuse_tracked(paths, option: str = "--out"):
+    """A study writes where git does not track anything; only --apply changes committed files."""
+    tracked = tracked_files(paths)
+    if tracked:
+        raise UsageError(f"{option} would overwrite committed files ({', '.join(tracked)}); write into an "
+                         "ignored folder (results/, build/) and use --apply to update the committed copies")
+
+
+# ------------------------------------------------- consistency and warnings
+PERIOD_SCORES = ("es1_pct", "es2_pct")  # taken over the last reference period [T - 2 pi, T]
+
+
+def short_horizon_note(configured) -> str:
+    """A word for es1/es2 when the run is shorter than the reference period they are taken over."""
+    import math as _math
+
+    if configured.stop - configured.start < 2 * _math.pi - 1e-9:
+        return " (stop < 2 pi: the last reference period they are taken over is not there)"
+    return ""
+
+
+def check_output_interval(interval, step: float):
+    """An output interval must be a whole multiple of the communication step."""
+    if interval is None:
+        return
+    ratio = interval / step
+    if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio):
+        raise UsageError(f"--output-interval {interval:g} is not a multiple of the step {step:g}; "
+                         f"give k x {step:g} with k = 1, 2, ... (e.g. {max(1, round(ratio)) * step:g})")
+
+
+# --------------------------------------------------------------- messages
+_NOISE = re.compile(r"Fatal py exception encountered|^unknown error$|^\s*$")
+_PREFIX = re.compile(r"^\[(?:ERROR|FATAL|WARNING|OK)\]\s*")
+
+
+def _fmu_messages(log) -> list:
+    """The FMU's own messages from an FMI log: pythonfmu's 'Fatal py exception ... unknown error' left out."""
+    messages = []
+    for entry in log:
+        for line in str(entry).splitlines():
+            line = _PREFIX.sub("", line.strip())
+            if not _NOISE.search(line) and line not in messages:
+                messages.append(line)
+    return messages
+
+
+def _fmi_error(error):
+    from .fmi import FmiError
+
+    for candidate in (error, getattr(error, "cause", None), error.__cause__):
+        if isinstance(candidate, FmiError):
+            return candidate
+    return None
+
+
+def one_line(error: BaseException) -> str:
+    """The message of ``error`` on one line: an FMI failure as the FMU's own words."""
+    fmi = _fmi_error(error)
+    if fmi is not None:
+        messages = _fmu_messages(fmi.log) or [f"{fmi.function} failed"]
+        text = "; ".join(messages)
+        if not text.startswith(f"{fmi.instance}:"):
+            text = f"{fmi.instance}: {text}"
+        if fmi.function != "fmi2ExitInitializationMode":
+            text += f" (in {fmi.function} at t = {fmi.time:.6g})"
+        return text
+    lines = [part.strip() for part in str(error).splitlines() if part.strip()]
+    lines = [line for line in lines if line != "unknown error"]
+    text = " | ".join(lines) or type(error).__name__
+    if isinstance(error, (FileNotFoundError, IsADirectoryError, PermissionError)) and error.filename:
+        text = f"{error.strerror}: {error.filename}"
+    return text
+
+
+def exit_status(error: BaseException) -> int:
+    """2 for a usage mistake (also a parameter the FMU rejects when initialisation ends), else 1."""
+    from .scenario import ScenarioError
+
+    if isinstance(error, (UsageError, ScenarioError)):
+        return USAGE_EXIT
+    fmi = _fmi_error(error)
+    if fmi is not None and fmi.function == "fmi2ExitInitializationMode" and \
+            any("is invalid; valid range" in line for line in _fmu_messages(fmi.log)):
+        return USAGE_EXIT
+    return FAILED_EXIT
+
+
+def report(error: BaseException, stream=None) -> int:
+    """Print ``error: ...`` on one line to stderr and return the exit status."""
+    print(f"error: {one_line(error)}", file=stream or sys.stderr)
+    return exit_status(error)

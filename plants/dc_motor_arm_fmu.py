@@ -1,0 +1,60 @@
+"""DcMotorArm: an arm driven by a DC motor with armature inductance, a third-order plant FMU.
+
+Our own plant for the general-order controller (docs/general_order.md); the
+equations are in ``dc_motor_arm_model``, the integrator in
+``plant_integration``; this class only adapts them to FMI.
+
+Co-simulation semantics (as the other plants):
+* y, dy, d2y are the angle, rate and acceleration and i the armature
+  current, all at the current communication time; no output depends
+  directly on u (the voltage acts through the inductance), so a closed loop
+  through this FMU has no algebraic loop.
+* In initialization mode the outputs already follow x1_start..x3_start.
+* doStep(t, h) holds u over [t, t + h] and integrates with classical RK4 in
+  ceil(h / max_internal_step) equal internal steps.
+"""
+import dc_motor_arm_model as model
+from afc_slave_base import INPUT, OUTPUT, Variable, finite, non_negative, positive
+# pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
+# so the plants' shared base class is imported under that name.
+from rk4_plant_slave import RK4PlantSlave as Fmi2Slave
+
+VARIABLES = (
+    positive("J", 0.5, "kg.m2", "inertia at the motor shaft (motor and arm)"),
+    non_negative("b", 0.2, "N.m.s/rad", "viscous friction"),
+    non_negative("m", 2.0, "kg", "arm mass (gravity load m gv lc sin x1)"),
+    non_negative("lc", 0.25, "m", "distance from the joint to the arm's mass centre"),
+    positive("gv", 9.8, "m/s2", "gravitational acceleration"),
+    positive("Kt", 0.5, "N.m/A", "motor torque constant"),
+    non_negative("Ke", 0.5, "V.s/rad", "back-emf constant"),
+    positive("R", 1.0, "Ohm", "armature resistance"),
+    positive("L", 0.1, "H", "armature inductance (L / R = 0.1 s electrical time constant)"),
+    finite("x1_start", 0.3, "rad", "initial angle x1(0) (0 = hanging down)"),
+    finite("x2_start", 0.0, "rad/s", "initial rate x2(0)"),
+    finite("x3_start", 0.0, "A", "initial armature current x3(0)"),
+    positive("max_internal_step", 1e-4, "s", "largest internal RK4 step"),
+    Variable("u", INPUT, 0.0, "V", "armature voltage (held over each communication step)"),
+    Variable("y", OUTPUT, 0.3, "rad", "arm angle x1"),
+    Variable("dy", OUTPUT, 0.0, "rad/s", "arm rate x2"),
+    Variable("d2y", OUTPUT, 0.0, "rad/s2", "arm acceleration dx2 = (Kt x3 - b x2 - m gv lc sin x1) / J"),
+    Variable("i", OUTPUT, 0.0, "A", "armature current x3"),
+)
+
+
+class DcMotorArm(Fmi2Slave):
+    VARIABLES = VARIABLES
+    STATE_ATTRIBUTES = ("x1", "x2", "x3")
+    MODEL_DESCRIPTION = ("Arm driven by a DC motor with armature inductance: a third-order plant "
+                         "(angle, rate, current), fixed-step RK4")
+    derivative = staticmethod(model.motor_arm_derivative)
+
+    def model_params(self):
+        return model.motor_arm_params(self.J, self.b, self.m, self.lc, self.gv, self.Kt, self.Ke,
+                                      self.R, self.L)
+
+    def compute_outputs(self):
+        self.y = self.x1
+        self.dy = self.x2
+        self.d2y = model.motor_arm_acceleration(self.x1, self.x2, self.x3, self._params)
+        self.i = self.x3
+        self.outputs_stale = False

@@ -1,0 +1,82 @@
+"""Nothing left behind in the temporary directory (issue 14, item 4).
+
+Each test points the temporary directory (Python's ``tempfile`` and ``TMPDIR``, which
+fmpy, Ecos and spawned workers use) at an empty folder of its own, runs a representative
+piece of work and checks that the folder is empty again: a master run, a failed
+instantiation, a run whose FMU rejects a parameter, an Ecos run, the tests' Driven helper.
+"""
+import dataclasses
+import gc
+import os
+import tempfile
+
+import pytest
+
+from harness import scenario as scenarios
+from harness.cases import Case, run_case
+from harness.fmi import Component, FmiError, ModelInfo
+from harness.master import simulate
+from tests.fmu_helpers import Driven
+
+
+@pytest.fixture
+def temp_dir(tmp_path, monkeypatch):
+    """An empty folder that is the temporary directory for this test."""
+    folder = tmp_path / "temp"
+    folder.mkdir()
+    monkeypatch.setenv("TMPDIR", str(folder))
+    monkeypatch.setattr(tempfile, "tempdir", str(folder))
+    return folder
+
+
+def left_in(folder):
+    return sorted(os.listdir(folder))
+
+
+def test_a_master_run_leaves_nothing(fmu_paths, temp_dir):
+    result = simulate(scenarios.configure("pendulum_case1", "vud", stop=0.02), fmu_paths=fmu_paths)
+    assert result.complete and left_in(temp_dir) == []
+
+
+def test_a_run_whose_fmu_rejects_a_parameter_leaves_nothing(fmu_paths, temp_dir):
+    outcome = run_case(Case("pendulum_case1", "vud", stop=0.02, overrides=(("controller.lambda_ce", 1.0),)),
+                       fmu_paths)
+    assert outcome["status"] == "failed" and "lambda_ce = 1.0 is invalid" in outcome["reason"]
+    assert left_in(temp_dir) == []
+
+
+def test_a_failed_instantiation_leaves_nothing(fmu_paths, temp_dir):
+    info = ModelInfo.read(fmu_paths["InvertedPendulum"])
+    wrong = dataclasses.replace(info, model_identifier="NoSuchModel")  # its shared library does not exist
+    with pytest.raises(FmiError, match="loading the FMU's shared library"):
+        Component("plant", wrong).instantiate()
+    assert left_in(temp_dir) == []
+
+
+def test_an_ecos_run_leaves_nothing(fmu_paths, temp_dir, tmp_path):
+    from harness import engines, ssp
+
+    try:
+        engines.import_ecospy()
+    except engines.EngineUnavailable as error:
+        pytest.skip(str(error))
+    scenario = scenarios.configure("pendulum_case1", "vud", stop=0.02)
+    package = ssp.export_ssp(scenario, tmp_path / "package" / "case.ssp", fmu_paths=fmu_paths)
+    assert left_in(temp_dir) == []
+    result = engines.run_ecos(package)
+    assert len(result.time) == scenario.steps + 1
+    assert left_in(temp_dir) == []  # Ecos unpacked the SSP and the FMUs into a folder removed after the run
+    assert os.environ["TMPDIR"] == str(temp_dir)  # and the temporary directory is restored
+
+
+def test_the_driven_helper_removes_its_extraction(fmu_paths, temp_dir):
+    path = fmu_paths["TrackingReference"]
+    Driven(path, "freed").initialize().free()
+    assert left_in(temp_dir) == []
+    forgotten = Driven(path, "forgotten").initialize()  # a test that frees the instance by hand
+    forgotten.slave.terminate()
+    forgotten.slave.freeInstance()
+    assert len(left_in(temp_dir)) == 1
+    del forgotten
+    gc.collect()
+    assert left_in(temp_dir) == []
