@@ -666,6 +666,9 @@ def matrix_markdown(matrix: dict) -> str:
 
 
 def hosts_command(args) -> int:
+    from . import cli_args
+
+    cli_args.refuse_tracked([Path(args.out) / "hosts.json", Path(args.out) / "hosts.md"])
     names = args.scenarios or ["pendulum_case1", "manipulator"]
     for name in names:
         scenarios.load(name)
@@ -678,11 +681,15 @@ def hosts_command(args) -> int:
     for item in args.stop or []:
         name, _, value = item.rpartition("=")
         try:
-            for target in ([name] if name else names):
-                stops[target] = float(value)
+            seconds = float(value)
         except ValueError:
-            print(f"error: --stop {item!r}: give seconds, or SCENARIO=seconds", file=sys.stderr)
+            seconds = math.nan
+        if not (math.isfinite(seconds) and seconds > 0) or (name and name not in names):
+            print(f"error: --stop {item!r}: give seconds > 0, or SCENARIO=seconds with SCENARIO one of "
+                  f"{', '.join(names)}", file=sys.stderr)
             return 2
+        for target in ([name] if name else names):
+            stops[target] = seconds
     if args.from_json:  # rewrite the outputs (and --apply them) from a matrix already run
         matrix = json.loads(Path(args.from_json).read_text())
     else:
@@ -712,7 +719,9 @@ def hosts_command(args) -> int:
 def register(commands):
     command = commands.add_parser("hosts", help="run the closed loops in every FMI host installed here and compare "
                                                 "with our converged result")
-    command.add_argument("scenarios", nargs="*", help="default: pendulum_case1 manipulator")
+    from . import cli_args
+
+    command.add_argument("scenarios", nargs="*", type=cli_args.scenario, help="default: pendulum_case1 manipulator")
     command.add_argument("--controller", nargs="+", choices=tuple(scenarios.CONTROLLER_VARIANTS), default=["vud"])
     command.add_argument("--host", nargs="+", help=f"hosts to run (default all): {', '.join(HOSTS_BY_KEY)}")
     command.add_argument("--steps", nargs="+", choices=("validated", "scenario"), default=["validated", "scenario"],
@@ -720,9 +729,10 @@ def register(commands):
     command.add_argument("--stop", nargs="+", metavar="[SCENARIO=]SECONDS",
                          help="shorter horizon, for every scenario or one (compared with our converged result over "
                               "the same horizon); default the scenarios' 20 s")
-    command.add_argument("--jobs", type=int, help="parallel processes (default: every core)")
+    command.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
     command.add_argument("--out", default=str(DEFAULT_OUT),
                          help=f"output folder (default {DEFAULT_OUT.relative_to(ROOT)}/)")
-    command.add_argument("--from-json", help="do not run: rewrite the outputs from this matrix's hosts.json")
+    command.add_argument("--from-json", type=cli_args.existing_file,
+                         help="do not run: rewrite the outputs from this matrix's hosts.json")
     command.add_argument("--apply", action="store_true", help="also write docs/hosts.md (a tracked file)")
     command.set_defaults(handler=hosts_command)

@@ -425,6 +425,9 @@ def apply_step(name: str, step: float):
 
 
 def convergence_command(args) -> int:
+    from . import cli_args
+
+    cli_args.refuse_tracked([Path(args.out) / "convergence.json", Path(args.out) / "convergence.md"])
     names = args.scenarios or list(ALL_SCENARIOS)
     for name in names:
         scenarios.load(name)  # clear error for an unknown name
@@ -475,21 +478,28 @@ def convergence_command(args) -> int:
 
 
 def register(commands):
+    from . import cli_args
+
     command = commands.add_parser("convergence", help="step study by accuracy: validated step (1 %%) per scenario x "
                                                       "controller x algorithm")
-    command.add_argument("scenarios", nargs="*", help=f"default: {', '.join(ALL_SCENARIOS)}")
-    command.add_argument("--jobs", type=int, help="parallel processes (default: every core)")
-    command.add_argument("--start-step", type=float, help="first step of the ladder (default: the scenario's step)")
-    command.add_argument("--finest-factor", type=float, default=16.0,
+    command.add_argument("scenarios", nargs="*", type=cli_args.scenario, help=f"default: {', '.join(ALL_SCENARIOS)}")
+    command.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
+    command.add_argument("--start-step", type=cli_args.positive_float,
+                         help="first step of the ladder (default: the scenario's step)")
+    command.add_argument("--finest-factor", type=cli_args.positive_float, default=16.0,
                          help="finest step tried = start step / this (default 16)")
-    command.add_argument("--limit", type=float, default=0.05, help="largest step tried (default 0.05 s)")
-    command.add_argument("--stop", type=float, help="shorter horizon (tests); default the scenarios' 20 s")
+    command.add_argument("--limit", type=cli_args.positive_float, default=0.05,
+                         help="largest step tried (default 0.05 s)")
+    command.add_argument("--stop", type=cli_args.positive_float,
+                         help="shorter horizon (tests); default the scenarios' 20 s")
     command.add_argument("--quick", action="store_true", help="vud only, 2 s horizon (a smoke test of the study)")
     command.add_argument("--out", default=str(DEFAULT_OUT),
                          help=f"output folder (default {DEFAULT_OUT.relative_to(ROOT)}/)")
-    command.add_argument("--from-json", help="do not run: rewrite the outputs from this study's convergence.json")
-    command.add_argument("--reuse", help="take the 20 s runs a previous study's convergence.json holds instead of "
-                                         "running them again (runs are deterministic; marked 'reused')")
+    command.add_argument("--from-json", type=cli_args.existing_file,
+                         help="do not run: rewrite the outputs from this study's convergence.json")
+    command.add_argument("--reuse", type=cli_args.existing_file,
+                         help="take the 20 s runs a previous study's convergence.json holds instead of running them "
+                              "again (runs are deterministic; marked 'reused')")
     command.add_argument("--apply", action="store_true",
                          help="also write harness/scenarios/convergence.json, docs/convergence.md and the chosen "
                               "step into each scenario file (tracked files)")
