@@ -27,12 +27,6 @@ def _progress_bar(total: int, description: str, enabled: bool):
 def run_command(args) -> int:
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
     cli_args.check_output_interval(args.output_interval, scenario.step)
-    if scenario.path is not None and scenario.path.parent == scenarios.SCENARIO_DIR:  # one the study covers
-        from .step_study import step_warning
-
-        warning = step_warning(scenario.name, args.controller, args.algorithm, scenario.step)
-        if warning:
-            print(warning, file=sys.stderr)
     progress, close = _progress_bar(scenario.steps, f"{scenario.name}/{args.controller}",
                                     enabled=not args.json and sys.stderr.isatty())
     for note in scenario.notes:  # e.g. the stop moved to a whole number of steps
@@ -46,6 +40,12 @@ def run_command(args) -> int:
             print(f"partial result ({failure.result.rows} rows) written to {args.out}")
         return cli_args.report(failure)
     close()
+    if scenario.path is not None and scenario.path.parent == scenarios.SCENARIO_DIR:  # one the study covers
+        from .step_study import step_warning  # after the run: a failed run says one line, its error
+
+        warning = step_warning(scenario.name, args.controller, args.algorithm, scenario.step)
+        if warning:
+            print(warning, file=sys.stderr)
     if args.out:
         result.write_csv(args.out, args.output_interval)
     scores = score_run(result)

@@ -143,7 +143,7 @@ def test_tables_refuse_a_stop_off_the_step_grid_before_any_run(fmu_paths, tmp_pa
     monkeypatch.setattr(cases, "parallel_map", lambda *args, **kwargs: started.append(args) or [])
     assert cli_main(["tables", "--out", str(tmp_path), "--stop", "0.0101", "--jobs", "1"]) == 2
     err = capsys.readouterr().err
-    assert err.count("error:") == 1 and "stop = 0.0101 s is not a whole number of steps of 0.0004 s" in err, err
+    assert err.count("error:") == 1 and "stop = 0.0101 s is not a whole number of steps of 0.0005 s" in err, err
     assert not started  # refused before any co-simulation started
 
 
