@@ -41,9 +41,12 @@ the standard library and pythonfmu.
 """
 from __future__ import annotations
 
+import atexit
 import ctypes
+import glob
 import json
 import math
+import os
 import sys
 from abc import ABCMeta
 from dataclasses import dataclass
@@ -196,6 +199,46 @@ def _drop_duplicate_path(resources) -> None:
         path[first + 1:] = [entry for entry in path[first + 1:] if entry != resources]
 
 
+_pythonfmu_finalizers: dict = {}  # handle of a loaded copy of the FMU's library -> its finalizePythonInterpreter
+_resources_seen: set = set()
+
+
+def _release_pythonfmu_state_at_exit() -> None:
+    """Run each loaded pythonfmu library's ``finalizePythonInterpreter`` once, before the C exit handlers."""
+    while _pythonfmu_finalizers:
+        _, finalize = _pythonfmu_finalizers.popitem()
+        finalize()
+
+
+def _disarm_pythonfmu_exit_use_after_free(resources) -> None:
+    """Keep pythonfmu 0.7's library from corrupting the heap when the host process exits (Linux).
+
+    The library holds its interpreter helper in a static ``std::shared_ptr`` (``pyState``).  At
+    process exit the C++ runtime destroys that static (freeing its 128-byte block), and then the
+    library's ELF destructor (``onLibraryUnload`` -> ``finalizePythonInterpreter``: ``pyState =
+    nullptr``) releases the destroyed pointer once more: it decrements a count inside the freed
+    block, which glibc may be using as a free-list pointer by then, and a later free aborts with
+    "corrupted double-linked list" (valgrind: invalid read in finalizePythonInterpreter of a block
+    freed by __run_exit_handlers).  Every loaded copy of the library (one per extraction) does it.
+    Calling ``finalizePythonInterpreter`` from a Python atexit handler, while the static is still
+    alive, releases it properly and leaves null pointers for both exit paths.  The library is
+    looked up only if already loaded (RTLD_NOLOAD), next to this FMU's resources folder.
+    """
+    if not resources or not sys.platform.startswith("linux") or resources in _resources_seen:
+        return
+    _resources_seen.add(resources)
+    for binary in glob.glob(os.path.join(os.path.dirname(os.path.normpath(resources)), "binaries", "*", "*.so")):
+        try:
+            library = ctypes.CDLL(binary, mode=os.RTLD_NOLOAD)
+            finalize = library.finalizePythonInterpreter
+        except (OSError, AttributeError):  # not loaded in this process, or not a pythonfmu library
+            continue
+        finalize.restype, finalize.argtypes = None, []
+        if not _pythonfmu_finalizers:
+            atexit.register(_release_pythonfmu_state_at_exit)  # again after a run, if a new copy loads
+        _pythonfmu_finalizers.setdefault(library._handle, finalize)
+
+
 def _fmi_entry(method):
     """Guard an FMI entry point that is not on the per-step path (see above)."""
     def guarded(self, *args):
@@ -223,6 +266,7 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         _drop_duplicate_path(self.resources)
+        _disarm_pythonfmu_exit_use_after_free(self.resources)
         self.description = self.MODEL_DESCRIPTION
         self.author = "afc-fmi project"
         self.version = "0.1.0"
