@@ -39,7 +39,6 @@ import argparse
 import hashlib
 import io
 import os
-import shutil
 import struct
 import subprocess
 import sys

@@ -295,18 +295,10 @@ def run_fmpy_ssp(package: Path, scenario) -> tuple:
 def run_ecos(package: Path, scenario) -> tuple:
     from .engines import run_ecos as run
 
-    private = tempfile.mkdtemp(prefix="afc_ecos_")  # Ecos leaves its ecos_* folders in TMPDIR: give it its own
-    before = os.environ.get("TMPDIR")
-    os.environ["TMPDIR"] = private
-    try:
-        with captured_console() as lines:
-            result = run(package, stop=scenario.stop, step=scenario.step, log_level="warn")
-    finally:
-        if before is None:
-            os.environ.pop("TMPDIR", None)
-        else:
-            os.environ["TMPDIR"] = before
-        shutil.rmtree(private, ignore_errors=True)
+    from .engines import ecos_temp_dir
+
+    with ecos_temp_dir(), captured_console() as lines:  # Ecos leaves its ecos_* folders in TMPDIR: its own
+        result = run(package, stop=scenario.stop, step=scenario.step, log_level="warn")
     return _from_engine(result, "plant.u"), console_warnings(lines), NOT_CAPTURED["ecos"]
 
 

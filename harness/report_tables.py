@@ -20,7 +20,7 @@ from pathlib import Path
 from . import claims as claims_module
 from . import scenario as scenarios
 from .cases import Case, default_jobs, run_cases
-from .step_study import convergence_summary, load_convergence, validated_step
+from .step_study import _fmt, convergence_summary, load_convergence, validated_step
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTROLLERS = tuple(scenarios.CONTROLLER_VARIANTS)  # vud, fixed, fae
@@ -48,14 +48,6 @@ def _csv_value(value):
     if isinstance(value, float):
         return repr(value)
     return "" if value is None else value
-
-
-def _fmt(value, digits=4) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "n/a"
-    if isinstance(value, float):
-        return f"{value:.{digits}g}"
-    return str(value)
 
 
 def paper_table(rows: list, scenario: str) -> str:

@@ -34,7 +34,6 @@ import time as clock
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import scenario as scenarios
 from .cases import STATUSES, one_line
 from .scenario import CONTROLLER_VARIANTS, ScenarioError
 from .scores import SCORE_KEYS
