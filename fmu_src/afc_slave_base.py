@@ -48,6 +48,7 @@ import json
 import math
 import os
 import sys
+import threading
 from abc import ABCMeta
 from dataclasses import dataclass
 from xml.etree.ElementTree import Element, SubElement
@@ -204,7 +205,14 @@ _resources_seen: set = set()
 
 
 def _release_pythonfmu_state_at_exit() -> None:
-    """Run each loaded pythonfmu library's ``finalizePythonInterpreter`` once, before the C exit handlers."""
+    """Run each loaded pythonfmu library's ``finalizePythonInterpreter`` once, before the C exit handlers.
+
+    Only when the host's main thread finalizes Python (a Python host: its statics are alive).  In
+    a host that is not Python, pythonfmu's own thread finalizes the interpreter from inside the
+    C++ exit handlers, after other copies' statics were destroyed: nothing is released then.
+    """
+    if threading.get_native_id() != os.getpid():
+        return
     while _pythonfmu_finalizers:
         _, finalize = _pythonfmu_finalizers.popitem()
         finalize()
