@@ -56,7 +56,7 @@ from .scores import control_energy, iae, itae, total_variation_rate
 
 ROOT = Path(__file__).resolve().parents[1]
 HOSTS_MD = ROOT / "docs" / "hosts.md"
-DEFAULT_OUT = ROOT / "results" / "hosts"
+DEFAULT_OUT = Path("results") / "hosts"  # under the working directory, like tables and regress
 METRICS = ("ITAE", "IAE", "Ec")
 ACCURACY = 0.01
 COMPONENT_ORDER = ("plant", "reference", "controller")  # the causal order of the loop
@@ -731,7 +731,7 @@ def register(commands):
                               "the same horizon); default the scenarios' 20 s")
     command.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
     command.add_argument("--out", default=str(DEFAULT_OUT),
-                         help=f"output folder (default {DEFAULT_OUT.relative_to(ROOT)}/)")
+                         help=f"output folder (default {DEFAULT_OUT}/ under the working directory)")
     command.add_argument("--from-json", type=cli_args.existing_file,
                          help="do not run: rewrite the outputs from this matrix's hosts.json")
     command.add_argument("--apply", action="store_true", help="also write docs/hosts.md (a tracked file)")

@@ -60,7 +60,7 @@ from .cases import default_jobs, parallel_map
 ROOT = Path(__file__).resolve().parents[1]
 CONVERGENCE_JSON = scenarios.SCENARIO_DIR / "convergence.json"
 CONVERGENCE_MD = ROOT / "docs" / "convergence.md"
-DEFAULT_OUT = ROOT / "results" / "step_study"
+DEFAULT_OUT = Path("results") / "step_study"  # under the working directory, like tables and regress
 CONTROLLERS = tuple(scenarios.CONTROLLER_VARIANTS)  # vud, fixed, fae
 ALGORITHMS = ("feedthrough", "jacobi")
 ALL_SCENARIOS = ("pendulum_case1", "pendulum_case2", "pendulum_case3", "manipulator")
@@ -494,7 +494,7 @@ def register(commands):
                          help="shorter horizon (tests); default the scenarios' 20 s")
     command.add_argument("--quick", action="store_true", help="vud only, 2 s horizon (a smoke test of the study)")
     command.add_argument("--out", default=str(DEFAULT_OUT),
-                         help=f"output folder (default {DEFAULT_OUT.relative_to(ROOT)}/)")
+                         help=f"output folder (default {DEFAULT_OUT}/ under the working directory)")
     command.add_argument("--from-json", type=cli_args.existing_file,
                          help="do not run: rewrite the outputs from this study's convergence.json")
     command.add_argument("--reuse", type=cli_args.existing_file,

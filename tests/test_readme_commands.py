@@ -205,6 +205,9 @@ def block_commands(block: Block) -> list:
     for prefix, _ in block.omits + block.appends:
         assert any(c.text.startswith(prefix) for c in commands), \
             f"{block.name}: directive prefix {prefix!r} matches no command (stale directive?)"
+    for command in kept:  # an editable install from the test's temporary folder would re-point the venv there
+        assert "pip install" not in command.text, \
+            f"{block.name}: '{command.text}' would reinstall the project; remove it with 'sub:' or 'omit:'"
     return kept
 
 
@@ -220,6 +223,12 @@ def test_every_block_is_either_run_or_skipped_with_a_reason():
             assert not first.startswith(("python ", "pip ", "fmpy ", "cc ")) or block.language == "text", \
                 f"{block.name}: a command in an untagged block; tag it bash (run) or text (synopsis)"
     assert len(RUN_BLOCKS) >= 8 and all(b.skip or block_commands(b) or b.language == "python" for b in RUN_BLOCKS)
+
+
+def test_a_block_that_would_reinstall_the_project_is_refused():
+    block = readme_blocks("```bash\npip install -e '.[native]' && python build_fmu.py\n```\n")[0]
+    with pytest.raises(AssertionError, match="would reinstall the project"):
+        block_commands(block)
 
 
 def test_the_directive_parser_reads_the_convention():
