@@ -8,7 +8,11 @@ On the same ``pendulum_case1``/``vud`` system at the same step:
    same shape whose doStep does no work (built from ``NULL_SCRIPT``);
 5. the in-process oracle (the same math, no FMI);
 6. the native edition (C FMUs, docs/native.md): our master with them, and libcosim
-   (libcosimpy) with either edition and no worker threads, on the same exported SSP;
+   (libcosimpy) with either edition and no worker threads, on the same exported SSP,
+   recording the scenario's signals at every step as our master does (and, for comparison,
+   with a last-value observer, which makes libcosim read every variable at every step);
+   our master's figures come with its compiled loop (harness/master_loop.py) and, beside
+   them, with its Python loop;
 each with its ratio to ours; and 7. each FMU alone (plant, reference, controller: the
 master's raw calls on that one instance) next to its null twin, which shows where the
 time of a step goes and what each FMU's Python adds to the FMI floor.  Speed targets live
@@ -117,21 +121,36 @@ def fmu_us_per_step(scenario, name: str, path) -> float:
 
 
 def master_us_per_step(scenario, algorithm: str, fmu_paths: dict | None = None,
-                       runs: dict | None = None) -> tuple[float, float]:
+                       runs: dict | None = None, loop: str = "auto") -> tuple[float, float]:
     """(loop only, whole run incl. instantiation and initialisation) in microseconds per step.
 
-    The timed run's result is kept in ``runs[algorithm]`` (for the agreement check)."""
-    result = Master(scenario, algorithm, fmu_paths).run()
+    ``loop``: the master's compiled loop ("auto", when zig is installed) or its Python loop
+    ("python"; harness/master_loop.py).  The timed run's result is kept in ``runs[algorithm]``
+    (for the agreement check)."""
+    result = Master(scenario, algorithm, fmu_paths, loop=loop).run()
     if runs is not None:
         runs[algorithm] = result
     return result.us_per_step, 1e6 * result.wall_s / scenario.steps
 
 
-def libcosim_us_per_step(package_dir: Path, scenario) -> float:
-    """libcosim's own stepping loop on a package made by libcosim_engine.with_algorithm."""
+LIBCOSIM_OBSERVERS = ("none", "scored", "recorded", "every")
+
+
+def libcosim_us_per_step(package_dir: Path, scenario, observer: str = "none") -> float:
+    """libcosim's own stepping loop on a package made by libcosim_engine.with_algorithm.
+
+    ``observer``: "none" (libcosim reads only the connected outputs), "scored" (a time-series
+    observer of the signals the scores read: e, de, ym, dym, u), "recorded" (of every signal our
+    master records), "every" (a last-value observer, which reads every variable at every step).
+    """
     from .libcosim_engine import run_libcosim
 
-    return run_libcosim(package_dir, scenario.stop, scenario.step).loop_us_per_step
+    if observer not in LIBCOSIM_OBSERVERS:
+        raise ValueError(f"observer {observer!r}; valid: {', '.join(LIBCOSIM_OBSERVERS)}")
+    record = {"scored": tuple(scenario.signals.values()), "recorded": scenario.record}.get(observer, ())
+    variables = scenario.record[:1] if observer == "every" else ()
+    return run_libcosim(package_dir, scenario.stop, scenario.step, variables=variables,
+                        record=record).loop_us_per_step
 
 
 def native_paths() -> dict | None:
@@ -255,11 +274,16 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
             libcosim_native = with_algorithm(native_package, folder / "libcosim_native", scenario.step, workers=0)
             measurements = {
                 "native_feedthrough": lambda: master_us_per_step(scenario, "feedthrough", native),
+                "native_feedthrough_python_loop": lambda: master_us_per_step(scenario, "feedthrough", native,
+                                                                             loop="python"),
                 "libcosim_native": lambda: libcosim_us_per_step(libcosim_native, scenario),
+                **{f"libcosim_native_{observer}": functools.partial(libcosim_us_per_step, libcosim_native, scenario,
+                                                                    observer) for observer in LIBCOSIM_OBSERVERS[1:]},
             }
         measurements["libcosim_python"] = lambda: libcosim_us_per_step(libcosim_python, scenario)
         _best_of(figures, notes, {
             "ours_feedthrough": lambda: master_us_per_step(scenario, "feedthrough", runs=runs),
+            "ours_feedthrough_python_loop": lambda: master_us_per_step(scenario, "feedthrough", loop="python"),
             "ours_jacobi": lambda: master_us_per_step(scenario, "jacobi"),
             "fmpy_ssp_whole": lambda: fmpy_ssp_us_per_step(package, scenario),
             "ecos": lambda: ecos_us_per_step(package, scenario),
@@ -270,8 +294,9 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
         }, repeat)
     ours, ours_whole = figures["ours_feedthrough_us"], figures["ours_feedthrough_whole_us"]
     figures["real_time_factor"] = scenario.step / (ours * 1e-6)
-    for key in ("ours_jacobi_us", "ecos_us", "floor_us", "oracle_us", "native_feedthrough_us",
-                "libcosim_native_us", "libcosim_python_us"):
+    for key in ("ours_feedthrough_python_loop_us", "ours_jacobi_us", "ecos_us", "floor_us", "oracle_us",
+                "native_feedthrough_us", "native_feedthrough_python_loop_us", "libcosim_native_us",
+                *(f"libcosim_native_{observer}_us" for observer in LIBCOSIM_OBSERVERS[1:]), "libcosim_python_us"):
         figures[key.replace("_us", "_ratio_to_ours")] = figures[key] / ours if figures.get(key) else None
     for key in ("ours_jacobi_whole_us", "fmpy_ssp_whole_us", "ecos_whole_us"):
         figures[key.replace("_us", "_ratio_to_ours")] = figures[key] / ours_whole if figures.get(key) else None
@@ -289,13 +314,18 @@ def bench_command(args) -> int:
     print(f"{figures['scenario']}/{figures['controller']}, step {figures['step']:g} s, "
           f"{figures['steps']} steps ({figures['stop']:g} s), best of {figures['repeat']}")
     ours, ours_whole = figures["ours_feedthrough_us"], figures["ours_feedthrough_whole_us"]
-    print(f"  {'us per step':36s} {'loop':>9s} {'x ours':>7s} {'whole run':>10s} {'x ours':>7s}")
-    rows = [("our master (feedthrough)", "ours_feedthrough"), ("our master (jacobi)", "ours_jacobi"),
+    print(f"  {'us per step':40s} {'loop':>9s} {'x ours':>7s} {'whole run':>10s} {'x ours':>7s}")
+    rows = [("our master (feedthrough)", "ours_feedthrough"),
+            ("  the same, Python loop", "ours_feedthrough_python_loop"), ("our master (jacobi)", "ours_jacobi"),
             ("fmpy SSP simulator", "fmpy_ssp"), ("Ecos", "ecos"),
             ("floor: bare fmpy calls, null FMUs", "floor"), ("oracle: same math, no FMI", "oracle"),
             ("native FMUs, our master (feedthrough)", "native_feedthrough"),
+            ("  the same, Python loop", "native_feedthrough_python_loop"),
             ("libcosim, pythonfmu FMUs, 0 workers", "libcosim_python"),
-            ("libcosim, native FMUs, 0 workers", "libcosim_native")]
+            ("libcosim, native FMUs, 0 workers", "libcosim_native"),
+            ("  + observing the 5 scored signals", "libcosim_native_scored"),
+            ("  + observing every recorded signal", "libcosim_native_recorded"),
+            ("  + last-value observer (all variables)", "libcosim_native_every")]
 
     def cell(value, reference):
         return f"{'':>9s} {'':>7s}" if value is None else f"{value:9.2f} {value / reference:7.2f}"
@@ -305,7 +335,7 @@ def bench_command(args) -> int:
         if key == "fmpy_ssp":
             loop, whole = None, figures.get("fmpy_ssp_whole_us")
         note = figures["notes"].get(key) or figures["notes"].get(f"{key}_whole") or ""
-        print(f"  {label:36s} {cell(loop, ours)} {cell(whole, ours_whole).rjust(18)} {note}")
+        print(f"  {label:40s} {cell(loop, ours)} {cell(whole, ours_whole).rjust(18)} {note}")
     print(f"  real-time factor of ours: {figures['real_time_factor']:.2f}")
     print(f"  timed runs of ours and the oracle agree within {figures['oracle_max_abs_difference']:.2g} "
           "(largest difference of a recorded signal)")
@@ -314,12 +344,14 @@ def bench_command(args) -> int:
     native, libcosim = figures.get("native_feedthrough_us"), figures.get("libcosim_native_us")
     if native:
         print(f"  target: native FMUs in our master <= 8 us/step: {native:.2f}; "
-              f"in libcosim (0 workers) <= 2 us/step: {libcosim:.2f}" if libcosim else "")
-    print(f"  {'one FMU alone, us per step':36s} {'FMU':>9s} {'null FMU':>9s} {'difference':>10s}")
+              f"in libcosim (0 workers) <= 2 us/step: {libcosim:.2f} with no observer, "
+              f"{figures.get('libcosim_native_scored_us') or float('nan'):.2f} observing the scored signals"
+              if libcosim else "")
+    print(f"  {'one FMU alone, us per step':40s} {'FMU':>9s} {'null FMU':>9s} {'difference':>10s}")
     for name in NULL_FMUS:
         own, null = figures.get(f"fmu_{name}_us"), figures.get(f"fmu_{name}_null_us")
         if own is not None and null is not None:
-            print(f"  {name:36s} {own:9.2f} {null:9.2f} {own - null:10.2f}")
+            print(f"  {name:40s} {own:9.2f} {null:9.2f} {own - null:10.2f}")
     fmpy_whole = figures.get("fmpy_ssp_whole_us")
     if fmpy_whole:
         print(f"  target: ours at least 2x faster than fmpy's SSP simulator (whole runs): "

@@ -47,8 +47,14 @@ def with_algorithm(ssp_path, out_dir, step: float, workers: int = 0) -> Path:
     return out_dir
 
 
-def run_libcosim(package_dir, stop: float, step: float, variables=()) -> LibcosimRun:
-    """Run the package folder made by :func:`with_algorithm` to ``stop``; read ``variables`` at the end."""
+def run_libcosim(package_dir, stop: float, step: float, variables=(), record=()) -> LibcosimRun:
+    """Run the package folder made by :func:`with_algorithm` to ``stop``; read ``variables`` at the end.
+
+    ``record``: "instance.variable" names that a time-series observer records at every step (what
+    our master records; libcosim then reads only those and the connected outputs).  ``variables``
+    uses a last-value observer, which makes libcosim read every variable of every FMU at every step
+    (on the pendulum loop with native FMUs: 2.3 us per step instead of 1.1 with no observer).
+    """
     try:
         from libcosimpy.CosimExecution import CosimExecution
         from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
@@ -57,18 +63,29 @@ def run_libcosim(package_dir, stop: float, step: float, variables=()) -> Libcosi
         raise LibcosimUnavailable(f"cannot import libcosimpy ({error}): pip install libcosimpy") from error
     log_output_level(CosimLogLevel.WARNING)
     execution = CosimExecution.from_ssp_file(str(package_dir), step_size=None)
-    observer = CosimObserver.create_last_value()
-    execution.add_observer(observer)
-    indices = {}
-    for dotted in variables:
-        instance, _, name = dotted.partition(".")
-        slave = execution.slave_index_from_instance_name(instance)
-        reference = next(v.reference for v in execution.slave_variables(slave) if v.name.decode() == name)
-        indices[dotted] = (slave, reference)
     steps = round(stop / step)
+    if variables:
+        observer = CosimObserver.create_last_value()
+        execution.add_observer(observer)
+    if record:
+        from libcosimpy.CosimEnums import CosimVariableType
+
+        series = CosimObserver.create_time_series(buffer_size=steps + 1)
+        execution.add_observer(series)
+        for dotted in record:
+            slave, reference = _reference(execution, dotted)
+            series.start_time_series(slave, reference, CosimVariableType.REAL)
+    indices = {dotted: _reference(execution, dotted) for dotted in variables}
     started = clock.perf_counter()
     execution.step(steps)
     elapsed = clock.perf_counter() - started
     last = {dotted: observer.last_real_values(slave, [reference])[0]
             for dotted, (slave, reference) in indices.items()}
     return LibcosimRun(steps=steps, loop_us_per_step=1e6 * elapsed / steps, last_values=last)
+
+
+def _reference(execution, dotted: str) -> tuple[int, int]:
+    """(slave index, value reference) of "instance.variable"."""
+    instance, _, name = dotted.partition(".")
+    slave = execution.slave_index_from_instance_name(instance)
+    return slave, next(v.reference for v in execution.slave_variables(slave) if v.name.decode() == name)

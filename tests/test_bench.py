@@ -29,7 +29,9 @@ def test_bench_json_reports_every_figure_and_times_the_right_runs(fmu_paths, cap
                         1.5 * (figures["floor_us"] + figures["oracle_us"]))
     # the timed master run and the timed oracle run are the same closed loop (to rounding)
     assert figures["oracle_max_abs_difference"] is not None and figures["oracle_max_abs_difference"] < 1e-9
-    for key in ("fmpy_ssp_whole", "ecos", "native_feedthrough", "libcosim_native", "libcosim_python"):
+    for key in ("fmpy_ssp_whole", "ecos", "native_feedthrough", "libcosim_native", "libcosim_python",
+                "ours_feedthrough_python_loop", "native_feedthrough_python_loop", "libcosim_native_scored",
+                "libcosim_native_recorded", "libcosim_native_every"):
         # an engine that fails (or a native edition without compiler) is reported with a note, not hidden
         value = figures[f"{key}_us"]
         if value is None:
