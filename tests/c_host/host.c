@@ -2,23 +2,25 @@
  * A minimal FMI 2.0 co-simulation host in C: it runs one FMU's shared library
  * without any Python on the host side (the pythonfmu binary embeds CPython).
  *
- *   host LIBRARY RESOURCE_URI GUID STEP INPUT_VRS OUTPUT_VR [r:VR=VALUE | i:VR=VALUE]... < INPUTS
+ *   host LIBRARY RESOURCE_URI GUID STEP INPUT_VRS OUTPUT_VRS [r:VR=VALUE | i:VR=VALUE]... < INPUTS
  *
- *   LIBRARY       binaries/linux64/<modelIdentifier>.so of the extracted FMU
+ *   LIBRARY       binaries/linux64/<modelIdentifier>.so of the extracted FMU (on Windows,
+ *                 binaries\win64\<modelIdentifier>.dll)
  *   RESOURCE_URI  file:///.../resources of the extracted FMU
  *   GUID          the guid attribute of modelDescription.xml
  *   STEP          communication step in s
  *   INPUT_VRS     comma-separated value references of the Real inputs, e.g. 18,19,20,21
- *   OUTPUT_VR     value reference of the Real output to print, e.g. 22
+ *   OUTPUT_VRS    value reference of the Real output to print, e.g. 22, or comma-separated
+ *                 references of several (printed on one line, separated by a space)
  *   r:VR=VALUE    set a Real parameter; i:VR=VALUE an Integer parameter
  *   INPUTS        on stdin, one line per communication point: one number per input
  *
  * Sequence: fmi2Instantiate, fmi2SetupExperiment(start 0), fmi2EnterInitializationMode,
  * the parameters, the first input line, fmi2ExitInitializationMode; then for each line
- * n: set the inputs, get the output and print it (%.17g, one per line), fmi2DoStep(n*STEP,
+ * n: set the inputs, get the outputs and print them (%.17g, one line per step), fmi2DoStep(n*STEP,
  * STEP); finally fmi2Terminate and fmi2FreeInstance.  The FMU's log goes to stderr.
  *
- * Exit status: 0 all calls returned fmi2OK; 1 usage; 2 dlopen/dlsym failed;
+ * Exit status: 0 all calls returned fmi2OK; 1 usage; 2 loading the library or a symbol failed;
  * 3 an FMI call returned a status >= fmi2Error (reported on stderr; the instance is
  * then freed and the host exits normally, which shows that it survived the error).
  *
@@ -26,12 +28,38 @@
  *   cc -O2 -o host tests/c_host/host.c -ldl
  *   LD_PRELOAD=$LIBPYTHON PYTHONHOME=$PREFIX ./host ...
  * The pythonfmu binary does not link libpython, so libpython must be loaded first.
+ *
+ * The same file builds a Windows host (LoadLibrary/GetProcAddress instead of dlopen/dlsym),
+ * which runs the native edition's win64 DLLs, e.g. under wine (tests/test_native_windows.py):
+ *   python -m ziglang cc -target x86_64-windows-gnu -O2 -o host.exe tests/c_host/host.c
+ *   wine64 host.exe binaries\win64\InvertedPendulum.dll ...
+ * Its standard output is in binary mode, so its lines are the Linux host's, byte for byte.
  */
-#include <dlfcn.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#ifdef _WIN32
+#include <fcntl.h>
+#include <io.h>
+#include <windows.h>
+typedef HMODULE Library;
+static Library open_library(const char *path) { return LoadLibraryA(path); }
+static void *library_symbol(Library library, const char *name) { return (void *)GetProcAddress(library, name); }
+static const char *library_error(void)
+{
+    static char text[64];
+    snprintf(text, sizeof text, "Windows error %lu", (unsigned long)GetLastError());
+    return text;
+}
+#else
+#include <dlfcn.h>
+typedef void *Library;
+static Library open_library(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
+static void *library_symbol(Library library, const char *name) { return dlsym(library, name); }
+static const char *library_error(void) { return dlerror(); }
+#endif
 
 /* the few FMI 2.0 types this host needs (fmi2TypesPlatform.h, fmi2FunctionTypes.h) */
 typedef void *fmi2Component;
@@ -71,6 +99,7 @@ typedef fmi2Status (*SetIntegerT)(fmi2Component, const fmi2ValueReference *, siz
 typedef fmi2Status (*DoStepT)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
 
 #define MAX_INPUTS 16
+#define MAX_OUTPUTS 16
 
 static const char *STATUS[] = {"OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"};
 
@@ -88,11 +117,11 @@ static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status
             instance ? instance : "", text);
 }
 
-static void *symbol(void *library, const char *name)
+static void *symbol(Library library, const char *name)
 {
-    void *found = dlsym(library, name);
+    void *found = library_symbol(library, name);
     if (!found) {
-        fprintf(stderr, "host: missing symbol %s: %s\n", name, dlerror());
+        fprintf(stderr, "host: missing symbol %s: %s\n", name, library_error());
         exit(2);
     }
     return found;
@@ -124,20 +153,25 @@ static int read_inputs(double *values, int count)
 int main(int argc, char **argv)
 {
     if (argc < 7) {
-        fprintf(stderr, "usage: %s LIBRARY RESOURCE_URI GUID STEP INPUT_VRS OUTPUT_VR "
+        fprintf(stderr, "usage: %s LIBRARY RESOURCE_URI GUID STEP INPUT_VRS OUTPUT_VRS "
                         "[r:VR=VALUE | i:VR=VALUE]... < INPUTS\n", argv[0]);
         return 1;
     }
     const char *library_path = argv[1], *resources = argv[2], *guid = argv[3];
     double step = strtod(argv[4], NULL);
-    fmi2ValueReference inputs[MAX_INPUTS], output = (fmi2ValueReference)strtoul(argv[6], NULL, 10);
-    int input_count = 0;
+    fmi2ValueReference inputs[MAX_INPUTS], outputs[MAX_OUTPUTS];
+    int input_count = 0, output_count = 0;
     for (char *token = strtok(argv[5], ","); token && input_count < MAX_INPUTS; token = strtok(NULL, ","))
         inputs[input_count++] = (fmi2ValueReference)strtoul(token, NULL, 10);
+    for (char *token = strtok(argv[6], ","); token && output_count < MAX_OUTPUTS; token = strtok(NULL, ","))
+        outputs[output_count++] = (fmi2ValueReference)strtoul(token, NULL, 10);
+#ifdef _WIN32
+    _setmode(_fileno(stdout), _O_BINARY); /* "\n", not "\r\n": the Linux host's bytes */
+#endif
 
-    void *library = dlopen(library_path, RTLD_NOW | RTLD_LOCAL);
+    Library library = open_library(library_path);
     if (!library) {
-        fprintf(stderr, "host: dlopen failed: %s\n", dlerror());
+        fprintf(stderr, "host: loading %s failed: %s\n", library_path, library_error());
         return 2;
     }
     InstantiateT instantiate = (InstantiateT)symbol(library, "fmi2Instantiate");
@@ -183,10 +217,11 @@ int main(int argc, char **argv)
         check(set_real(instance, inputs, (size_t)input_count, row), "fmi2SetReal (start inputs)");
     check(exit_init(instance), "fmi2ExitInitializationMode");
     for (long n = 0; have_row; n++) {
-        double time = (double)n * step, value;
+        double time = (double)n * step, values[MAX_OUTPUTS];
         check(set_real(instance, inputs, (size_t)input_count, row), "fmi2SetReal");
-        check(get_real(instance, &output, 1, &value), "fmi2GetReal");
-        printf("%.17g\n", value);
+        check(get_real(instance, outputs, (size_t)output_count, values), "fmi2GetReal");
+        for (int k = 0; k < output_count; k++)
+            printf(k + 1 < output_count ? "%.17g " : "%.17g\n", values[k]);
         check(do_step(instance, time, step, 1), "fmi2DoStep");
         have_row = read_inputs(row, input_count);
     }
