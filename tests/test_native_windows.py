@@ -151,11 +151,17 @@ def native():
     return build_native.ensure_built()
 
 
-class HostRun:
-    """One FMU of a recorded closed-loop run, to be replayed by the C host."""
+# the binary of an FMU for (FMI version, platform), relative to the extracted FMU, as each host names it
+LIBRARIES = {(2, "linux64"): "binaries/linux64/{}.so", (2, "win64"): "binaries\\win64\\{}.dll",
+             (3, "linux64"): "binaries/x86_64-linux/{}.so", (3, "win64"): "binaries\\x86_64-windows\\{}.dll"}
 
-    def __init__(self, fmu: Path, folder: Path, step: float, parameters: dict, inputs: dict, outputs: list):
-        self.fmu, self.folder, self.step = fmu, folder, step
+
+class HostRun:
+    """One FMU of a recorded closed-loop run, to be replayed by the C host (FMI 2.0 or 3.0)."""
+
+    def __init__(self, fmu: Path, version: int, folder: Path, step: float, parameters: dict, inputs: dict,
+                 outputs: list):
+        self.fmu, self.version, self.folder, self.step = fmu, version, folder, step
         md = read_model_description(str(fmu))
         self.model = md.coSimulation.modelIdentifier
         self.guid = md.guid
@@ -165,12 +171,16 @@ class HostRun:
         with zipfile.ZipFile(fmu) as archive:
             archive.extractall(folder)
 
-    def arguments(self) -> list[str]:
+    def arguments(self, platform: str) -> list[str]:
         names = list(self.inputs)
-        parameters = [f"i:{self.variables[n].valueReference}={int(value)}" if self.variables[n].type == "Integer"
+        parameters = [f"i:{self.variables[n].valueReference}={int(value)}"
+                      if self.variables[n].type in ("Integer", "Int32")
                       else f"r:{self.variables[n].valueReference}={float(value)!r}"
                       for n, value in self.parameters.items()]
-        return [(self.folder / "resources").as_uri(), self.guid, repr(self.step),
+        resources = self.folder / "resources"  # FMI 2.0: a URI; FMI 3.0: a path (on Windows, wine's Z: drive)
+        location = (resources.as_uri() if self.version == 2 else
+                    "Z:" + str(resources).replace("/", "\\") if platform == "win64" else str(resources))
+        return [LIBRARIES[self.version, platform].format(self.model), location, self.guid, repr(self.step),
                 ",".join(str(self.variables[n].valueReference) for n in names),
                 ",".join(str(self.variables[n].valueReference) for n in self.outputs), *parameters]
 
@@ -181,19 +191,20 @@ class HostRun:
     def run(self, host: Path, platform: str, wine=None) -> np.ndarray:
         if platform == "win64":
             program, environment = wine
-            command = [program, str(host), f"binaries\\win64\\{self.model}.dll", *self.arguments()]
+            command = [program, str(host), *self.arguments(platform)]
         else:
             environment = dict(os.environ)
-            command = [str(host), str(Path("binaries", "linux64", f"{self.model}.so")), *self.arguments()]
+            command = [str(host), *self.arguments(platform)]
         returncode, output, errors = run_with_files(command, self.stdin(), environment, self.folder, platform)
-        assert returncode == 0, f"{self.model} ({platform}) exited {returncode}:\n{errors}"
+        assert returncode == 0, f"{self.model} (FMI {self.version}, {platform}) exited {returncode}:\n{errors}"
         values = np.array([[float(x) for x in line.split()] for line in output.splitlines()])
         assert values.shape == (len(next(iter(self.inputs.values()))), len(self.outputs)), (platform, values.shape)
         return values
 
 
-def recorded_runs(scenario_name: str, controller: str, stop: float, native: dict, folder: Path) -> dict:
-    """A Linux run of the native edition by our master; each FMU's inputs and outputs in it."""
+def recorded_runs(scenario_name: str, controller: str, stop: float, native: dict, version: int, folder: Path) -> dict:
+    """A Linux run of the native FMI 2.0 edition by our master; each FMU's inputs and outputs in it,
+    to replay with that FMU's FMI ``version`` binaries (the FMI 3.0 ones compute the same)."""
     from harness import scenario as scenarios
     from harness.master import simulate
 
@@ -207,7 +218,8 @@ def recorded_runs(scenario_name: str, controller: str, stop: float, native: dict
         inputs = {c.target_variable: result.signal(c.source) for c in configured.connections
                   if c.target_instance == name}
         outputs = [column.split(".", 1)[1] for column in result.columns if column.split(".", 1)[0] == name]
-        runs[name] = (HostRun(native[spec.fmu][2], folder / name, configured.step, spec.parameters, inputs, outputs),
+        runs[name] = (HostRun(native[spec.fmu][version], version, folder / name, configured.step, spec.parameters,
+                              inputs, outputs),
                       np.column_stack([result.signal(f"{name}.{v}") for v in outputs]))
     return runs
 
@@ -225,25 +237,27 @@ def scaled_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.max(np.abs(a - b), axis=0) / np.where(scale > 0.0, scale, 1.0)
 
 
+@pytest.mark.parametrize("version", [2, 3])
 @pytest.mark.parametrize("scenario_name,controller,stop", CASES)
-def test_the_win64_dlls_under_wine_compute_what_the_linux_binaries_compute(native, hosts, wine, tmp_path,
+def test_the_win64_dlls_under_wine_compute_what_the_linux_binaries_compute(native, hosts, wine, tmp_path, version,
                                                                             scenario_name, controller, stop):
     if scenario_name not in scenario_names():
         pytest.skip(f"no scenario {scenario_name} here")
-    runs = recorded_runs(scenario_name, controller, stop, native, tmp_path)
+    runs = recorded_runs(scenario_name, controller, stop, native, version, tmp_path)
     assert {run.model for run, _ in runs.values()} >= {"AdaptiveFuzzyController", "TrackingReference"}
     for name, (run, recorded) in runs.items():
         linux = run.run(hosts["linux64"], "linux64")
         # the host replays the master's calls: the Linux binary gives back the recorded outputs
-        np.testing.assert_array_equal(linux, recorded, err_msg=f"{name} ({run.model}): Linux host vs master")
+        np.testing.assert_array_equal(linux, recorded, err_msg=f"{name} ({run.model}, FMI {version}): Linux host vs "
+                                                               "master")
         windows = run.run(hosts["win64"], "win64", wine)
         differing = int(np.count_nonzero(windows != linux))
         scaled = scaled_difference(windows, linux)
         worst = run.outputs[int(np.argmax(scaled))]
-        print(f"{scenario_name} {controller} {run.model}: {linux.shape[0]} steps x {len(run.outputs)} outputs, win64 under wine "
-              f"vs linux64: {differing} values differ, largest difference {scaled.max():.3g} of the output's "
+        print(f"{scenario_name} {controller} {run.model} FMI {version}: {linux.shape[0]} steps x {len(run.outputs)} "
+              f"outputs, win64 under wine vs linux64: {differing} values differ, largest difference {scaled.max():.3g} of the output's "
               f"range ({worst}), per value up to {relative_difference(windows, linux):.3g} relative")
         assert np.all(scaled <= WINDOWS_TOLERANCE), (
-            f"{run.model}: win64 under wine differs from linux64 in {differing} values, up to {scaled.max():.3g} "
+            f"{run.model} (FMI {version}): win64 under wine differs from linux64 in {differing} values, up to {scaled.max():.3g} "
             f"of the range of {worst} (tolerance {WINDOWS_TOLERANCE:g}); outputs {run.outputs}")
         assert np.ptp(linux, axis=0).max() > 0.0  # the outputs moved
