@@ -24,6 +24,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -127,11 +128,12 @@ def zig_build(target: str, output: Path, *extra: str) -> Path:
         environment = dict(os.environ)
         environment.setdefault("ZIG_GLOBAL_CACHE_DIR", str(build_native.WORK_DIR / "zig-cache"))
         environment.setdefault("ZIG_LOCAL_CACHE_DIR", str(build_native.WORK_DIR / "zig-cache"))
-        scratch = binary.with_name(f".{binary.name}.{os.getpid()}.tmp{output.suffix}")
-        completed = subprocess.run([sys.executable, "-m", "ziglang", *arguments, "-o", str(scratch), str(HOST_SOURCE)],
-                                   capture_output=True, text=True, env=environment, cwd=HOST_DIR)
-        assert completed.returncode == 0, f"compiling {HOST_SOURCE.name} for {target} failed:\n{completed.stderr}"
-        os.replace(scratch, binary)
+        with tempfile.TemporaryDirectory(dir=HOST_DIR) as scratch:  # zig writes a .pdb beside a .exe
+            built = Path(scratch) / output.name
+            completed = subprocess.run([sys.executable, "-m", "ziglang", *arguments, "-o", str(built), str(HOST_SOURCE)],
+                                       capture_output=True, text=True, env=environment, cwd=scratch)
+            assert completed.returncode == 0, f"compiling {HOST_SOURCE.name} for {target} failed:\n{completed.stderr}"
+            os.replace(built, binary)
     return binary
 
 
