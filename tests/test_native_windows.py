@@ -16,7 +16,7 @@ recorded, with %.17g.  The test checks
   computes what wine computes here.
 
 Wine is Debian's (``apt-get install --no-install-recommends wine64``); the test skips when it
-is absent.  It uses its own wine prefix, build/wine-prefix (about 700 MB, made once in ~5 s),
+is absent.  It uses its own wine prefix, build/wine-prefix (695 MB, made once in about 7 s),
 unless WINEPREFIX is set.
 """
 import hashlib
@@ -79,11 +79,13 @@ def wineserver_program(wine: str) -> str | None:
 def wine_environment() -> dict:
     """Quiet and headless: no debug channels, no display, no Mono/Gecko installers."""
     environment = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    environment.setdefault("WINEPREFIX", str(DEFAULT_PREFIX))
     environment.update(WINEDEBUG="-all", WINEDLLOVERRIDES="mscoree,mshtml=")
-    # wineserver's socket folder (wine-XXXXXX) goes under the prefix, not the system's temp folder
-    environment["TMPDIR"] = str(Path(environment["WINEPREFIX"]) / "server-tmp")
-    Path(environment["TMPDIR"]).mkdir(parents=True, exist_ok=True)
+    if "WINEPREFIX" not in environment:
+        environment["WINEPREFIX"] = str(DEFAULT_PREFIX)
+        # our prefix's wineserver keeps its socket folder (wine-XXXXXX) there, not in /tmp (a prefix
+        # of the user's keeps the TMPDIR of its running server: one prefix, one server)
+        environment["TMPDIR"] = str(DEFAULT_PREFIX / "server-tmp")
+        Path(environment["TMPDIR"]).mkdir(parents=True, exist_ok=True)
     return environment
 
 
