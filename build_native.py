@@ -353,28 +353,53 @@ def _compile(model: NativeModel, header_dir: Path, fmi_version: int, target: Tar
     return cached
 
 
-def math_library() -> Path:
-    """The controller's pure C modules (afc_math, initial_error_latch, chatter_monitor) as one
-    Linux shared library, for their tests through ctypes."""
-    sources = [ROOT / "fmu_src" / f"{name}.c" for name in ("afc_math", "initial_error_latch", "chatter_monitor")]
-    digest = hashlib.sha256(b"".join(p.read_bytes() + p.with_suffix(".h").read_bytes() for p in sources)
-                            + " ".join(CFLAGS).encode()).hexdigest()[:16]
-    library = WORK_DIR / "obj" / f"afc_math-{digest}.so"
+def host_target() -> str | None:
+    """zig's target for a library this machine loads: the linux64 FMUs' target on x86-64 Linux
+    (its libc stubs are then already in zig's cache), else zig's own host target."""
+    import platform
+
+    if sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64"):
+        return "x86_64-linux-gnu.2.17"
+    return None
+
+
+def host_library(name: str, sources, headers=()) -> Path:
+    """``sources`` compiled into one shared library for this machine (not an FMU), cached in
+    build/native/obj by the hash of sources, headers and flags; for the tests of the C math
+    and for the master's compiled loop."""
+    sources = tuple(Path(p) for p in sources)
+    target = host_target()
+    extension = {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
+    flags = [f for f in CFLAGS if f != "-fvisibility=hidden"]
+    digest = hashlib.sha256(" ".join([*flags, str(target)]).encode())
+    for path in (*sources, *headers):
+        digest.update(Path(path).read_bytes())
+    library = WORK_DIR / "obj" / f"{name}-{digest.hexdigest()[:16]}{extension}"
     if library.exists():
         return library
+    if not compiler_available():
+        raise NativeBuildError(f"building {name} needs zig's C compiler: pip install ziglang "
+                               "(or pip install -e '.[native]')")
     library.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=library.parent) as scratch:
         output = Path(scratch) / library.name
         environment = dict(os.environ)
         environment.setdefault("ZIG_GLOBAL_CACHE_DIR", str(WORK_DIR / "zig-cache"))
         environment.setdefault("ZIG_LOCAL_CACHE_DIR", str(WORK_DIR / "zig-cache"))
-        arguments = ["cc", "-target", "x86_64-linux-gnu.2.17", "-shared", "-fPIC",
-                     *[f for f in CFLAGS if f != "-fvisibility=hidden"], "-o", str(output), *map(str, sources), "-lm"]
+        arguments = ["cc", *(["-target", target] if target else []), "-shared", "-fPIC", *flags,
+                     "-o", str(output), *map(str, sources), "-lm"]
         completed = subprocess.run(_zig(*arguments), capture_output=True, text=True, env=environment, cwd=scratch)
         if completed.returncode != 0:
-            raise NativeBuildError(f"compiling the controller's C modules failed:\n{completed.stderr}")
-        os.replace(output, library)
+            raise NativeBuildError(f"compiling {name} failed:\n{completed.stderr}")
+        os.replace(output, library)  # atomic: concurrent builders each write their own scratch copy
     return library
+
+
+def math_library() -> Path:
+    """The controller's pure C modules (afc_math, initial_error_latch, chatter_monitor) as one
+    shared library, for their tests through ctypes."""
+    sources = [ROOT / "fmu_src" / f"{name}.c" for name in ("afc_math", "initial_error_latch", "chatter_monitor")]
+    return host_library("afc_math", sources, [p.with_suffix(".h") for p in sources])
 
 
 def fat_macho(binaries: list[bytes]) -> bytes:

@@ -74,8 +74,8 @@ def _raw_calls(scenario, name: str, path) -> tuple:
     outputs = list(dict.fromkeys(
         [c.source_variable for c in scenario.connections if c.source_instance == name]
         + [d.split(".", 1)[1] for d in scenario.record if d.startswith(name + ".")]))
-    values, set_reals = component.real_writer(inputs)
-    return component, component.real_reader(outputs)[1], set_reals, component.stepper(), values
+    writer = component.real_writer(inputs)
+    return component, component.real_reader(outputs).call, writer.call, component.stepper(), writer.values
 
 
 def floor_us_per_step(scenario, null_paths: dict) -> float:

@@ -192,6 +192,9 @@ def run_cases(cases: list, jobs: int | None = None, description: str = "co-simul
         import build_fmu
 
         fmu_paths = build_fmu.ensure_built()  # once, before the workers start
+    from . import master_loop
+
+    master_loop.library()  # the compiled loop too (when zig is installed), so no two workers compile it
     return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths), cases, jobs, description, progress)
 
 

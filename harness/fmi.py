@@ -77,6 +77,16 @@ class ModelInfo:
 
 
 @dataclass
+class BoundArrayCall:
+    """One getReal or setReal bound to an instance and to value-reference and value arrays."""
+
+    values: object  # ctypes double array the call fills or sends
+    call: object  # () -> FMI status
+    references: object  # ctypes value-reference array
+    function_address: int  # of fmi2GetReal / fmi2SetReal (or fmi3GetFloat64 / fmi3SetFloat64)
+
+
+@dataclass
 class Component:
     """One FMU instance; the fast per-step interface of the master."""
 
@@ -201,24 +211,35 @@ class Component:
         values = (fmi2Real * count)()
         return references, values, count
 
-    def _bound_array_call(self, function, names) -> tuple:
-        """(values array, call): ``function(instance, references, count, values[, count])`` with every
-        argument prepared once as a ctypes object and no per-call argument conversion (a C
-        function pointer without argtypes: 0.4 us per call instead of 0.9 us through fmpy's)."""
+    def _bound_array_call(self, function, names) -> "BoundArrayCall":
+        """``function(instance, references, count, values[, count])`` with every argument prepared
+        once as a ctypes object and no per-call argument conversion (a C function pointer without
+        argtypes: 0.4 us per call instead of 0.9 us through fmpy's)."""
         references, values, count = self.real_buffer(names)
-        bare = ctypes.CFUNCTYPE(ctypes.c_int)(ctypes.cast(function, ctypes.c_void_p).value)
+        address = ctypes.cast(function, ctypes.c_void_p).value
+        bare = ctypes.CFUNCTYPE(ctypes.c_int)(address)
         arguments = [ctypes.c_void_p(self._component), references, ctypes.c_size_t(count), values]
         if self.fmi3:
             arguments.append(ctypes.c_size_t(count))
-        return values, functools.partial(bare, *arguments)
+        return BoundArrayCall(values, functools.partial(bare, *arguments), references, address)
 
-    def real_reader(self, names) -> tuple:
-        """(values array, call) where call() reads ``names`` into values and returns the status."""
+    def real_reader(self, names) -> "BoundArrayCall":
+        """``.call()`` reads ``names`` into ``.values`` and returns the status."""
         return self._bound_array_call(self._raw_get_real, names)
 
-    def real_writer(self, names) -> tuple:
-        """(values array, call) where call() writes values to ``names`` and returns the status."""
+    def real_writer(self, names) -> "BoundArrayCall":
+        """``.call()`` writes ``.values`` to ``names`` and returns the status."""
         return self._bound_array_call(self._raw_set_real, names)
+
+    @property
+    def instance_address(self) -> int:
+        """The FMU instance (fmi2Component / fmi3Instance) as an address, for harness/master_loop.c."""
+        return ctypes.c_void_p(self._component).value
+
+    @property
+    def do_step_address(self) -> int:
+        """The address of fmi2DoStep (or fmi3DoStep), for harness/master_loop.c."""
+        return ctypes.cast(self._raw_do_step3 if self.fmi3 else self._raw_do_step, ctypes.c_void_p).value
 
     def stepper(self):
         """call(time, step, 1) -> status: fmi2DoStep (or fmi3DoStep) bound to this instance."""
@@ -233,4 +254,4 @@ class Component:
         raise FmiError(self.name, function, status, time, list(self.log))
 
 
-__all__ = ["Component", "FmiError", "ModelInfo"]
+__all__ = ["BoundArrayCall", "Component", "FmiError", "ModelInfo"]

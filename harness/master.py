@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .fmi import Component, FmiError, ModelInfo
+from .fmi import BoundArrayCall, Component, FmiError, ModelInfo
+from . import master_loop
 from .scenario import Scenario, ScenarioError
 
 ALGORITHMS = ("feedthrough", "jacobi")
@@ -187,6 +188,7 @@ class _Read:
     view: np.ndarray  # numpy view of values
     first_column: int  # recorded outputs come first in the buffer
     recorded: int
+    array: BoundArrayCall  # the same call and arrays, for harness/master_loop.c
     copies = None  # marks a read in the per-step loop
 
 
@@ -198,6 +200,7 @@ class _Write:
     copies: tuple  # (index in values, source values array, index in source, divergence bound)
     sources: tuple = ()  # "instance.variable" of each value, for messages
     targets: tuple = ()
+    array: BoundArrayCall | None = None  # the same call and arrays, for harness/master_loop.c
 
 
 def _order(scenario: Scenario, infos: dict, reads: dict, algorithm: str) -> list:
@@ -237,7 +240,7 @@ class Master:
     """Instantiate, initialise and step the FMUs of one scenario."""
 
     def __init__(self, scenario: Scenario, algorithm: str = "feedthrough", fmu_paths: dict | None = None,
-                 logging_on: bool = True):
+                 logging_on: bool = True, loop: str = "auto"):
         if algorithm not in ALGORITHMS:
             raise ScenarioError(f"unknown algorithm {algorithm!r}; valid: {', '.join(ALGORITHMS)}")
         self.scenario, self.algorithm = scenario, algorithm
@@ -245,6 +248,7 @@ class Master:
                       for name, spec in scenario.components.items()}
         validate(scenario, self.infos)
         self.logging_on = logging_on
+        self.loop = master_loop.choice(loop)  # "auto": the compiled loop if it can be built (master_loop.py)
         self.components: dict[str, Component] = {}
 
     def _prepare_plan(self, algorithm: str | None = None) -> list:
@@ -261,10 +265,10 @@ class Master:
             if kind != "get":
                 continue
             component = self.components[name]
-            values, call = component.real_reader(reads[name])
+            array = component.real_reader(reads[name])
             recorded = [v for v in reads[name] if f"{name}.{v}" in scenario.record]
-            read_buffers[name] = _Read(component, values, call, np.ctypeslib.as_array(values),
-                                       len(columns), len(recorded))
+            read_buffers[name] = _Read(component, array.values, array.call, np.ctypeslib.as_array(array.values),
+                                       len(columns), len(recorded), array)
             columns += [f"{name}.{v}" for v in recorded]
         plan = []
         for kind, name in order:
@@ -273,12 +277,12 @@ class Master:
                 continue
             component = self.components[name]
             incoming = [c for c in scenario.connections if c.target_instance == name]
-            values, call = component.real_writer([c.target_variable for c in incoming])
+            array = component.real_writer([c.target_variable for c in incoming])
             copies = tuple((k, read_buffers[c.source_instance].values,
                             reads[c.source_instance].index(c.source_variable), scenario.bound(c.source))
                            for k, c in enumerate(incoming))
-            plan.append(_Write(component, values, call, copies, tuple(c.source for c in incoming),
-                               tuple(c.target for c in incoming)))
+            plan.append(_Write(component, array.values, array.call, copies, tuple(c.source for c in incoming),
+                               tuple(c.target for c in incoming), array))
         self.plan_columns = columns
         self.column_bounds = np.array([scenario.bound(name) for name in columns])
         # CSV columns in the scenario's record order
@@ -327,7 +331,7 @@ class Master:
         stop = start + steps * step
         wall_start = clock.perf_counter()
         record = None
-        rows_done = 0
+        self.rows_done = 0
         try:
             for name, spec in scenario.components.items():
                 component = Component(name, self.infos[name]).instantiate(logging_on=self.logging_on)
@@ -345,38 +349,26 @@ class Master:
             record = np.empty((steps + 1, len(self.plan_columns)))
             for component in self.components.values():
                 component.exit_initialization()
-            reads = [(a.first_column, a.first_column + a.recorded, a.view[:a.recorded])
-                     for a in plan if a.copies is None and a.recorded]
-            steppers = [(component, component.stepper()) for component in self.components.values()]
-            bound = self.column_bounds
             every = progress_every or max(1, steps // 200)
+            compiled = master_loop.library(self.loop)
             loop_start = clock.perf_counter()
-            for n in range(steps):
-                t = start + n * step
-                self._propagate(plan, t)
-                row = record[n]
-                for first, last, view in reads:
-                    row[first:last] = view
-                rows_done = n + 1
-                if rows_done % DIVERGENCE_CHECK_EVERY == 0:
-                    self._check_bound(record, rows_done - DIVERGENCE_CHECK_EVERY, rows_done, bound)
-                for component, do_step in steppers:
-                    status = do_step(t, step, 1)
-                    if status > FMI_WARNING:
-                        component.fail("fmi2DoStep", status, t)
-                if progress is not None and rows_done % every == 0:
-                    progress(rows_done, steps)
+            if compiled is None:
+                self._loop_python(plan, record, progress, every)
+            else:
+                self._loop_compiled(compiled, plan, record, progress, every)
             self._propagate(plan, stop)
             row = record[steps]
-            for first, last, view in reads:
-                row[first:last] = view
-            rows_done = steps + 1
-            self._check_bound(record, max(0, rows_done - DIVERGENCE_CHECK_EVERY - 1), rows_done, bound)
+            for action in plan:
+                if action.copies is None and action.recorded:
+                    row[action.first_column:action.first_column + action.recorded] = action.view[:action.recorded]
+            self.rows_done = steps + 1
+            self._check_bound(record, max(0, self.rows_done - DIVERGENCE_CHECK_EVERY - 1), self.rows_done,
+                              self.column_bounds)
             self.loop_s = clock.perf_counter() - loop_start
             if progress is not None:
                 progress(steps, steps)
         except (FmiError, Divergence, ScenarioError) as error:
-            result = self._result(record, rows_done, clock.perf_counter() - wall_start, complete=False)
+            result = self._result(record, self.rows_done, clock.perf_counter() - wall_start, complete=False)
             if isinstance(error, ScenarioError) and record is None:
                 raise
             raise SimulationFailed(str(error), result, error) from error
@@ -385,7 +377,69 @@ class Master:
             for component in self.components.values():
                 component.free()
             self.components = {}
-        return self._result(record, rows_done, clock.perf_counter() - wall_start, complete=True)
+        return self._result(record, self.rows_done, clock.perf_counter() - wall_start, complete=True)
+
+    def _loop_python(self, plan: list, record, progress, every: int):
+        """Rows 0 .. steps - 1: propagate, record, check, step every FMU (the reference loop)."""
+        scenario = self.scenario
+        steps, step, start = scenario.steps, scenario.step, scenario.start
+        reads = [(a.first_column, a.first_column + a.recorded, a.view[:a.recorded])
+                 for a in plan if a.copies is None and a.recorded]
+        steppers = [(component, component.stepper()) for component in self.components.values()]
+        bound = self.column_bounds
+        for n in range(steps):
+            t = start + n * step
+            self._propagate(plan, t)
+            row = record[n]
+            for first, last, view in reads:
+                row[first:last] = view
+            self.rows_done = rows_done = n + 1
+            if rows_done % DIVERGENCE_CHECK_EVERY == 0:
+                self._check_bound(record, rows_done - DIVERGENCE_CHECK_EVERY, rows_done, bound)
+            for component, do_step in steppers:
+                status = do_step(t, step, 1)
+                if status > FMI_WARNING:
+                    component.fail("fmi2DoStep", status, t)
+            if progress is not None and rows_done % every == 0:
+                progress(rows_done, steps)
+
+    def _loop_compiled(self, function, plan: list, record, progress, every: int):
+        """The same rows by harness/master_loop.c, in blocks of ``every`` rows (the progress
+        interval); whatever stops it is raised here as _loop_python raises it."""
+        scenario = self.scenario
+        steps, step, start = scenario.steps, scenario.step, scenario.start
+        components = list(self.components.values())
+        loop = master_loop.CompiledLoop(function, plan, components, record, self.column_bounds,
+                                        DIVERGENCE_CHECK_EVERY)
+        n = 0
+        while n < steps:
+            last = min(steps, (n // every + 1) * every)
+            outcome = loop.run(start, step, n, last)
+            if outcome.outcome != master_loop.LOOP_DONE:
+                self._raise_stop(outcome, plan, components, record)
+            self.rows_done = n = last
+            if progress is not None and n % every == 0:
+                progress(n, steps)
+
+    def _raise_stop(self, outcome, plan: list, components: list, record):
+        """Raise, for what stopped the compiled loop at row ``outcome.row``, what the Python loop raises."""
+        row = outcome.row
+        t = self.scenario.start + row * self.scenario.step
+        kind = outcome.outcome
+        self.rows_done = row  # the row's reads and writes are not complete
+        if kind == master_loop.LOOP_READ_FAILED:
+            plan[outcome.action].component.fail("fmi2GetReal", outcome.status, t)
+        if kind == master_loop.LOOP_WRITE_DIVERGED:
+            self._diverged_on_write(plan[outcome.action], outcome.copy, outcome.value, t)
+        if kind == master_loop.LOOP_WRITE_FAILED:
+            plan[outcome.action].component.fail("fmi2SetReal", outcome.status, t)
+        self.rows_done = row + 1  # the row is recorded
+        if kind == master_loop.LOOP_RECORD_DIVERGED:
+            self._check_bound(record, self.rows_done - DIVERGENCE_CHECK_EVERY, self.rows_done, self.column_bounds)
+        if kind == master_loop.LOOP_STEP_FAILED:
+            components[outcome.action].fail("fmi2DoStep", outcome.status, t)
+        raise RuntimeError(f"the compiled master loop stopped at row {row} for no reason the Python loop "
+                           f"knows (outcome {kind}); rerun with {master_loop.ENVIRONMENT_SWITCH}=python")
 
     def _check_bound(self, record, first: int, last: int, bound: np.ndarray):
         block = record[first:last]

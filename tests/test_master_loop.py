@@ -1,0 +1,291 @@
+"""The master's compiled loop (harness/master_loop.c) against its Python loop.
+
+1. The C loop alone, on fake FMUs made of ctypes callbacks: the order of the calls, their
+   arguments (time, step, the copied values), the record, and each way a block stops
+   (getReal / setReal / doStep status >= error, a value beyond its bound on its way to an
+   input, a recorded value beyond its bound at the end of a check block), for FMI 2.0 and
+   FMI 3.0 signatures.
+2. The whole master with either loop on the real FMUs: every recorded value bit-identical,
+   the same FMU messages, and on failure the same exception text and the same rows kept.
+"""
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+import build_native
+from harness import master_loop
+from harness import scenario as scenarios
+from harness.master import Master, SimulationFailed
+
+pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
+                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+
+GET2 = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint), ctypes.c_size_t,
+                        ctypes.POINTER(ctypes.c_double))
+GET3 = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint), ctypes.c_size_t,
+                        ctypes.POINTER(ctypes.c_double), ctypes.c_size_t)
+STEP2 = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int)
+_bool_p = ctypes.POINTER(ctypes.c_bool)
+STEP3 = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_bool, _bool_p,
+                         _bool_p, _bool_p, ctypes.POINTER(ctypes.c_double))
+
+
+class FakeSystem:
+    """Two fake FMUs, A (outputs a0 recorded, a1 connected to B's input) and B (output b0 recorded).
+
+    Plan per row: get A, set B <- A.a1, get B; then doStep A, doStep B.  A's outputs are
+    (row + 0.25, 2 row + 0.5) at its k-th getReal (k = row); B's output is its last input
+    times 3.  ``fail`` = (call, row, status) makes that call return ``status`` at that row.
+    """
+
+    def __init__(self, fmi_version: int, rows: int, fail=None, a1_override=None, bound=1e6, record_bounds=(1e6, 1e6),
+                 a0_override=None):
+        self.fmi_version, self.fail, self.a1_override, self.a0_override = fmi_version, fail, a1_override, a0_override
+        self.trace = []
+        self.row = {"getA": 0, "setB": 0, "getB": 0, "stepA": 0, "stepB": 0}
+        self.b_input = 0.0
+        get_type, step_type = (GET3, STEP3) if fmi_version == 3 else (GET2, STEP2)
+        self._callbacks = [get_type(self._get), get_type(self._set), step_type(self._step)]
+        self.a_refs, self.a_values = (ctypes.c_uint * 2)(7, 8), (ctypes.c_double * 2)()
+        self.b_in_refs, self.b_in_values = (ctypes.c_uint * 1)(3), (ctypes.c_double * 1)()
+        self.b_refs, self.b_values = (ctypes.c_uint * 1)(4), (ctypes.c_double * 1)()
+        self.sources = (ctypes.c_void_p * 1)(ctypes.addressof(self.a_values))
+        self.source_index = (ctypes.c_size_t * 1)(1)
+        self.bounds = (ctypes.c_double * 1)(bound)
+        get_address, set_address, step_address = (ctypes.cast(c, ctypes.c_void_p).value for c in self._callbacks)
+        actions = (master_loop.Action * 3)()
+        for entry, (kind, instance, call, refs, values, first, recorded) in zip(actions, [
+                (master_loop.ACTION_READ, 1, get_address, self.a_refs, self.a_values, 0, 1),
+                (master_loop.ACTION_WRITE, 2, set_address, self.b_in_refs, self.b_in_values, 0, 0),
+                (master_loop.ACTION_READ, 2, get_address, self.b_refs, self.b_values, 1, 1)]):
+            entry.kind, entry.fmi_version, entry.instance, entry.call = kind, fmi_version, instance, call
+            entry.references, entry.count, entry.values = ctypes.addressof(refs), len(values), ctypes.addressof(values)
+            entry.first_column, entry.recorded = first, recorded
+        actions[1].sources = ctypes.addressof(self.sources)
+        actions[1].source_index = ctypes.addressof(self.source_index)
+        actions[1].bounds = ctypes.addressof(self.bounds)
+        steppers = (master_loop.Stepper * 2)()
+        for entry, instance in zip(steppers, (1, 2)):
+            entry.fmi_version, entry.instance, entry.do_step = fmi_version, instance, step_address
+        self.actions, self.steppers = actions, steppers
+        self.record = np.full((rows, 2), -1.0)
+        self.column_bounds = (ctypes.c_double * 2)(*record_bounds)
+
+    def _status(self, call: str) -> int:
+        row = self.row[call]
+        self.row[call] += 1
+        if self.fail and self.fail[0] == call and self.fail[1] == row:
+            return self.fail[2]
+        return 0
+
+    def _get(self, instance, references, count, values, *value_count):
+        if self.fmi_version == 3:
+            assert value_count == (count,)
+        name = "A" if instance == 1 else "B"
+        row = self.row[f"get{name}"]
+        self.trace.append((f"get{name}", [references[i] for i in range(count)]))
+        if name == "A":
+            values[0], values[1] = row + 0.25, 2 * row + 0.5
+            if self.a1_override and self.a1_override[0] == row:
+                values[1] = self.a1_override[1]
+            if self.a0_override and self.a0_override[0] == row:
+                values[0] = self.a0_override[1]
+        else:
+            values[0] = 3 * self.b_input
+        return self._status(f"get{name}")
+
+    def _set(self, instance, references, count, values, *value_count):
+        assert instance == 2 and count == 1 and references[0] == 3
+        self.b_input = values[0]
+        self.trace.append(("setB", values[0]))
+        return self._status("setB")
+
+    def _step(self, instance, time, step, no_prior_state, *outputs):
+        assert no_prior_state
+        name = "A" if instance == 1 else "B"
+        self.trace.append((f"step{name}", time, step))
+        return self._status(f"step{name}")
+
+    def run(self, first_row: int, last_row: int, start=0.5, step=0.1, check_every=4) -> master_loop.Outcome:
+        function = master_loop.library("c")
+        outcome = master_loop.Outcome()
+        function(self.actions, 3, self.steppers, 2, start, step, first_row, last_row,
+                 self.record.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 2,
+                 ctypes.cast(self.column_bounds, ctypes.POINTER(ctypes.c_double)), check_every, ctypes.byref(outcome))
+        return outcome
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_the_c_loop_makes_the_calls_of_the_python_loop_in_its_order(fmi_version):
+    system = FakeSystem(fmi_version, rows=6)
+    outcome = system.run(0, 5, start=0.5, step=0.1)
+    assert outcome.outcome == master_loop.LOOP_DONE
+    expected = []
+    for n in range(5):
+        t = 0.5 + n * 0.1  # the time exactly as Python computes it
+        expected += [("getA", [7, 8]), ("setB", 2 * n + 0.5), ("getB", [4]), ("stepA", t, 0.1), ("stepB", t, 0.1)]
+    assert system.trace == expected
+    assert system.record[:5].tolist() == [[n + 0.25, 3 * (2 * n + 0.5)] for n in range(5)]
+    assert system.record[5].tolist() == [-1.0, -1.0]  # rows beyond the block untouched
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+@pytest.mark.parametrize("call, outcome_kind, action, rows_recorded", [
+    ("getA", master_loop.LOOP_READ_FAILED, 0, 2),
+    ("setB", master_loop.LOOP_WRITE_FAILED, 1, 2),
+    ("getB", master_loop.LOOP_READ_FAILED, 2, 2),
+    ("stepA", master_loop.LOOP_STEP_FAILED, 0, 3),
+    ("stepB", master_loop.LOOP_STEP_FAILED, 1, 3),
+])
+def test_an_fmi_error_stops_the_block_where_the_python_loop_stops(fmi_version, call, outcome_kind, action,
+                                                                   rows_recorded):
+    system = FakeSystem(fmi_version, rows=6, fail=(call, 2, 3))
+    outcome = system.run(0, 6)
+    assert (outcome.outcome, outcome.row, outcome.action, outcome.status) == (outcome_kind, 2, action, 3)
+    assert system.trace[-1][0] == call  # nothing is called after the failing call
+    assert (system.record[:rows_recorded] != -1).all() and (system.record[rows_recorded:] == -1).all()
+
+
+@pytest.mark.parametrize("status", [1, 2])
+def test_a_warning_does_not_stop_the_loop_and_a_discard_does(status):
+    system = FakeSystem(2, rows=4, fail=("stepB", 1, status))
+    outcome = system.run(0, 4)
+    assert outcome.outcome == (master_loop.LOOP_DONE if status == 1 else master_loop.LOOP_STEP_FAILED)
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), 10.0, -10.0])
+def test_a_value_beyond_its_bound_never_reaches_the_input(value):
+    system = FakeSystem(2, rows=6, a1_override=(3, value), bound=10.0)
+    outcome = system.run(0, 6)
+    assert (outcome.outcome, outcome.row, outcome.action, outcome.copy) == (master_loop.LOOP_WRITE_DIVERGED, 3, 1, 0)
+    assert outcome.value == value or (math.isnan(value) and math.isnan(outcome.value))
+    assert system.trace[-1] == ("getA", [7, 8])  # setB was not called with it
+    assert all(entry[1] == entry[1] and abs(entry[1]) < 10 for entry in system.trace if entry[0] == "setB")
+
+
+def test_a_recorded_value_beyond_its_bound_stops_at_the_end_of_its_check_block():
+    # a0 = row + 0.25 passes 5 at row 5; with blocks of 4 rows the check at the end of rows 4..7 finds it
+    system = FakeSystem(2, rows=10, record_bounds=(5.0, 1e6))
+    outcome = system.run(0, 10, check_every=4)
+    assert (outcome.outcome, outcome.row) == (master_loop.LOOP_RECORD_DIVERGED, 7)
+    assert [entry[0] for entry in system.trace[-3:]] == ["getA", "setB", "getB"]  # row 7 not stepped
+
+
+@pytest.mark.parametrize("row, stop_row", [(3, 3), (4, 7), (7, 7), (8, None)])
+def test_every_row_of_a_check_block_is_checked(row, stop_row):
+    system = FakeSystem(2, rows=9, record_bounds=(50.0, 1e6), a0_override=(row, float("nan")))
+    outcome = system.run(0, 9, check_every=4)
+    if stop_row is None:  # row 8 starts a block that has not ended
+        assert outcome.outcome == master_loop.LOOP_DONE
+    else:
+        assert (outcome.outcome, outcome.row) == (master_loop.LOOP_RECORD_DIVERGED, stop_row)
+
+
+def test_blocks_continue_where_the_last_one_ended():
+    whole, parts = FakeSystem(2, rows=7), FakeSystem(2, rows=7)
+    assert whole.run(0, 7).outcome == master_loop.LOOP_DONE
+    for first, last in ((0, 3), (3, 4), (4, 7)):
+        assert parts.run(first, last).outcome == master_loop.LOOP_DONE
+    assert parts.trace == whole.trace
+    assert np.array_equal(parts.record, whole.record)
+
+
+# ------------------------------------------------------- the whole master, either loop
+@pytest.fixture(scope="module")
+def native_fmus():
+    return {name: paths[2] for name, paths in build_native.ensure_built().items()}
+
+
+@pytest.fixture(scope="module")
+def native3_fmus():
+    return {name: paths[3] for name, paths in build_native.ensure_built().items()}
+
+
+def _both_loops(scenario, algorithm, fmu_paths):
+    outcomes = {}
+    for loop in ("python", "c"):
+        master = Master(scenario, algorithm, fmu_paths, loop=loop)
+        try:
+            outcomes[loop] = ("ok", master.run(), None)
+        except SimulationFailed as failure:
+            outcomes[loop] = ("failed", failure.result, str(failure))
+        outcomes[loop] += (master.logs,)
+    return outcomes["python"], outcomes["c"]
+
+
+def _assert_same(python, compiled):
+    assert python[0] == compiled[0]
+    assert python[2] == compiled[2]  # the same error text
+    assert python[1].rows == compiled[1].rows
+    assert np.array_equal(python[1].values, compiled[1].values, equal_nan=True)
+    assert python[3] == compiled[3]  # the same FMU messages
+
+
+@pytest.mark.parametrize("algorithm", ["feedthrough", "jacobi"])
+@pytest.mark.parametrize("name", ["pendulum_case1", "pendulum_case3", "manipulator", "motor_arm"])
+def test_native_fmus_give_bit_identical_runs_with_either_loop(native_fmus, name, algorithm):
+    scenario = scenarios.configure(name, "fae" if name == "pendulum_case3" else "vud", None, 0.3)
+    python, compiled = _both_loops(scenario, algorithm, native_fmus)
+    assert python[0] == "ok"
+    _assert_same(python, compiled)
+
+
+def test_fmi3_fmus_give_bit_identical_runs_with_either_loop(native3_fmus):
+    python, compiled = _both_loops(scenarios.configure("pendulum_case2", "vud", None, 0.3), "feedthrough",
+                                   native3_fmus)
+    assert python[0] == "ok"
+    _assert_same(python, compiled)
+
+
+def test_pythonfmu_fmus_give_bit_identical_runs_with_either_loop(fmu_paths):
+    python, compiled = _both_loops(scenarios.configure("pendulum_case1", "fixed", None, 0.1), "jacobi", fmu_paths)
+    assert python[0] == "ok"
+    _assert_same(python, compiled)
+
+
+def _failing(kind: str):
+    base = scenarios.configure("pendulum_case1", "vud", None, 1.0)
+    if kind == "write":  # u beyond its bound on its way to the plant
+        return dataclasses.replace(base, bounds={**base.bounds, "controller.u": 3.0})
+    if kind == "record":  # theta1 (recorded, not connected) beyond its bound
+        return dataclasses.replace(base, bounds={**base.bounds, "controller.theta1": 0.05})
+    # the plant's doStep fails: a learning rate that throws the loop out at once, no bounds to stop it first
+    inf = float("inf")
+    return dataclasses.replace(base.with_parameter("controller.gamma", 1e300), divergence_bound=inf,
+                               bounds={"plant.y": inf, "controller.u": inf})
+
+
+@pytest.mark.parametrize("kind, cause, rows", [("write", "Divergence", 74), ("record", "Divergence", 64),
+                                               ("step", "FmiError", 3)])
+def test_a_failing_run_fails_alike_with_either_loop(native_fmus, kind, cause, rows):
+    python, compiled = _both_loops(_failing(kind), "feedthrough", native_fmus)
+    assert python[0] == "failed" and python[1].rows == rows, python[2]
+    _assert_same(python, compiled)
+
+
+def test_the_loop_can_be_chosen(monkeypatch):
+    scenario = scenarios.configure("pendulum_case1", "vud", None, 0.01)
+    monkeypatch.setenv(master_loop.ENVIRONMENT_SWITCH, "python")
+    assert master_loop.library() is None
+    assert Master(scenario, loop="c").loop == "c"  # the argument wins over the environment
+    monkeypatch.setenv(master_loop.ENVIRONMENT_SWITCH, "fast")
+    with pytest.raises(master_loop.LoopUnavailable, match="AFC_MASTER_LOOP='fast' is not valid; valid: auto, python, c"):
+        master_loop.library()
+    with pytest.raises(ValueError, match="valid: auto, python, c"):
+        Master(scenario, loop="cython")
+
+
+def test_progress_is_reported_at_the_same_rows_with_either_loop(native_fmus):
+    scenario = scenarios.configure("pendulum_case1", "vud", None, 0.1)  # 200 steps
+    calls = {}
+    for loop in ("python", "c"):
+        calls[loop] = []
+        Master(scenario, "feedthrough", native_fmus, loop=loop).run(
+            progress=lambda done, total, seen=calls[loop]: seen.append((done, total)), progress_every=30)
+    assert calls["python"] == calls["c"]
+    assert calls["c"][:2] == [(30, 200), (60, 200)] and calls["c"][-1] == (200, 200)
