@@ -134,6 +134,16 @@ def _zig(*args: str) -> list[str]:
     return [sys.executable, "-m", "ziglang", *args]
 
 
+def _ziglang_version() -> str:
+    """The installed ziglang package's version (no subprocess), or "" without it."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("ziglang")
+    except metadata.PackageNotFoundError:
+        return ""
+
+
 def _zig_version() -> str:
     return subprocess.run(_zig("version"), capture_output=True, text=True, check=True).stdout.strip()
 
@@ -371,7 +381,9 @@ def host_library(name: str, sources, headers=()) -> Path:
     target = host_target()
     extension = {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
     flags = [f for f in CFLAGS if f != "-fvisibility=hidden"]
-    digest = hashlib.sha256(" ".join([*flags, str(target)]).encode())
+    if target is None:
+        flags.append("-mcpu=baseline")  # not the build machine's CPU: a shared build folder stays usable
+    digest = hashlib.sha256(" ".join([*flags, str(target), _ziglang_version()]).encode())
     for path in (*sources, *headers):
         digest.update(Path(path).read_bytes())
     library = WORK_DIR / "obj" / f"{name}-{digest.hexdigest()[:16]}{extension}"
@@ -391,7 +403,11 @@ def host_library(name: str, sources, headers=()) -> Path:
         completed = subprocess.run(_zig(*arguments), capture_output=True, text=True, env=environment, cwd=scratch)
         if completed.returncode != 0:
             raise NativeBuildError(f"compiling {name} failed:\n{completed.stderr}")
-        os.replace(output, library)  # atomic: concurrent builders each write their own scratch copy
+        try:
+            os.replace(output, library)  # atomic: concurrent builders each write their own scratch copy
+        except OSError:
+            if not library.exists():  # Windows refuses to replace a DLL another process has loaded
+                raise
     return library
 
 

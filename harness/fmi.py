@@ -25,6 +25,7 @@ from fmpy.fmi2 import defaultCallbacks as _fmpy_default_callbacks
 STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal", "pending")
 FMI3_TYPE_NAMES = {"Float64": "Real", "Int32": "Integer"}
 FMI_ERROR = 3
+FMI3_FUNCTIONS = {"fmi2GetReal": "fmi3GetFloat64", "fmi2SetReal": "fmi3SetFloat64", "fmi2DoStep": "fmi3DoStep"}
 
 
 class FmiError(RuntimeError):
@@ -249,8 +250,11 @@ class Component:
         return functools.partial(self._raw_do_step, self._component)
 
     def fail(self, function: str, status: int, time: float):
-        """Raise the FmiError for a status >= error returned by a per-step call."""
+        """Raise the FmiError for a status >= error returned by a per-step call (named by its
+        FMI 2.0 name; an FMI 3.0 instance reports the FMI 3.0 function)."""
         self.time = time
+        if self.fmi3:
+            function = FMI3_FUNCTIONS.get(function, function)
         raise FmiError(self.name, function, status, time, list(self.log))
 
 

@@ -27,6 +27,7 @@ class LibcosimRun:
     steps: int
     loop_us_per_step: float  # libcosim's stepping alone
     last_values: dict  # "instance.variable" -> value at the stop time
+    recorded_samples: int = 0  # samples of each ``record`` variable the time-series observer holds
 
 
 def with_algorithm(ssp_path, out_dir, step: float, workers: int = 0) -> Path:
@@ -72,16 +73,24 @@ def run_libcosim(package_dir, stop: float, step: float, variables=(), record=())
 
         series = CosimObserver.create_time_series(buffer_size=steps + 1)
         execution.add_observer(series)
+        observed = []
         for dotted in record:
             slave, reference = _reference(execution, dotted)
-            series.start_time_series(slave, reference, CosimVariableType.REAL)
+            if not series.start_time_series(slave, reference, CosimVariableType.REAL):
+                raise RuntimeError(f"libcosim: cannot observe {dotted} with a time-series observer")
+            observed.append((slave, reference))
     indices = {dotted: _reference(execution, dotted) for dotted in variables}
     started = clock.perf_counter()
     execution.step(steps)
     elapsed = clock.perf_counter() - started
     last = {dotted: observer.last_real_values(slave, [reference])[0]
             for dotted, (slave, reference) in indices.items()}
-    return LibcosimRun(steps=steps, loop_us_per_step=1e6 * elapsed / steps, last_values=last)
+    recorded = 0
+    if record:  # the observer did record: a sample of each variable at each step
+        recorded = min(len(series.time_series_real_samples(slave, reference, 1, steps + 1)[0])
+                       for slave, reference in observed)
+    return LibcosimRun(steps=steps, loop_us_per_step=1e6 * elapsed / steps, last_values=last,
+                       recorded_samples=recorded)
 
 
 def _reference(execution, dotted: str) -> tuple[int, int]:

@@ -249,6 +249,7 @@ class Master:
         validate(scenario, self.infos)
         self.logging_on = logging_on
         self.loop = master_loop.choice(loop)  # "auto": the compiled loop if it can be built (master_loop.py)
+        self._compiled_loop = master_loop.library(self.loop)  # resolved before any FMU is instantiated
         self.components: dict[str, Component] = {}
 
     def _prepare_plan(self, algorithm: str | None = None) -> list:
@@ -326,6 +327,8 @@ class Master:
 
     def run(self, progress=None, progress_every: int = 0) -> RunResult:
         """Run the scenario; on failure raise SimulationFailed holding the partial result."""
+        if isinstance(progress_every, bool) or not isinstance(progress_every, int) or progress_every < 0:
+            raise ValueError(f"progress_every = {progress_every!r}: a whole number of steps >= 0 (0: steps // 200)")
         scenario = self.scenario
         steps, step, start = scenario.steps, scenario.step, scenario.start
         stop = start + steps * step
@@ -350,7 +353,7 @@ class Master:
             for component in self.components.values():
                 component.exit_initialization()
             every = progress_every or max(1, steps // 200)
-            compiled = master_loop.library(self.loop)
+            compiled = self._compiled_loop
             loop_start = clock.perf_counter()
             if compiled is None:
                 self._loop_python(plan, record, progress, every)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import sys
 from pathlib import Path
 
 SOURCE = Path(__file__).with_name("master_loop.c")
@@ -46,10 +47,11 @@ class Outcome(ctypes.Structure):
 
 
 class LoopUnavailable(RuntimeError):
-    """AFC_MASTER_LOOP=c but the compiled loop cannot be built here."""
+    """The compiled loop cannot be built or loaded here (an error only when it was required)."""
 
 
 _library = None
+_unavailable = None  # why the compiled loop could not be built or loaded here (said once)
 
 
 def choice(loop: str = "auto") -> str:
@@ -65,26 +67,44 @@ def choice(loop: str = "auto") -> str:
 
 
 def library(loop: str = "auto"):
-    """The compiled loop's ``master_loop_run``, or None for the Python loop: ``loop`` (or
-    $AFC_MASTER_LOOP) is "python", or it is "auto" and zig's compiler is not installed."""
-    global _library
+    """The compiled loop's ``master_loop_run``, or None for the Python loop.
+
+    None when ``loop`` (or $AFC_MASTER_LOOP) is "python", or when it is "auto" and the library
+    cannot be had here (zig not installed, the build or the load failed: said once on stderr).
+    "c" raises LoopUnavailable instead of falling back.
+    """
+    global _library, _unavailable
     wanted = choice(loop)
     if wanted == "python":
         return None
-    if _library is None:
-        import build_native
-
-        if not build_native.compiler_available():
-            if wanted == "c":
-                raise LoopUnavailable(f"{ENVIRONMENT_SWITCH}=c needs zig's C compiler: pip install -e '.[native]'")
-            return None
-        function = ctypes.CDLL(str(build_native.host_library("master_loop", (SOURCE,)))).master_loop_run
-        function.restype = ctypes.c_int
-        function.argtypes = [ctypes.POINTER(Action), ctypes.c_size_t, ctypes.POINTER(Stepper), ctypes.c_size_t,
-                             ctypes.c_double, ctypes.c_double, ctypes.c_int64, ctypes.c_int64, _double_p,
-                             ctypes.c_size_t, _double_p, ctypes.c_int64, ctypes.POINTER(Outcome)]
-        _library = function
+    if _library is None and _unavailable is None:
+        try:
+            _library = _load()
+        except LoopUnavailable as error:
+            _unavailable = str(error)
+            if wanted == "auto" and "zig's C compiler is not installed" not in _unavailable:
+                print(f"warning: the master runs its Python loop: {_unavailable}", file=sys.stderr)
+    if _library is None and wanted == "c":
+        raise LoopUnavailable(f"{ENVIRONMENT_SWITCH}=c: {_unavailable}")
     return _library
+
+
+def _load():
+    """Build (or find in the cache) and load the library; LoopUnavailable says why it cannot be."""
+    import build_native
+
+    if not build_native.compiler_available():
+        raise LoopUnavailable("zig's C compiler is not installed (pip install -e '.[native]')")
+    try:
+        function = ctypes.CDLL(str(build_native.host_library("master_loop", (SOURCE,)))).master_loop_run
+    except (build_native.NativeBuildError, OSError) as error:
+        raise LoopUnavailable(f"the compiled loop {SOURCE.name} cannot be built or loaded: "
+                              f"{str(error).strip().splitlines()[0]}") from error
+    function.restype = ctypes.c_int
+    function.argtypes = [ctypes.POINTER(Action), ctypes.c_size_t, ctypes.POINTER(Stepper), ctypes.c_size_t,
+                         ctypes.c_double, ctypes.c_double, ctypes.c_int64, ctypes.c_int64, _double_p,
+                         ctypes.c_size_t, _double_p, ctypes.c_int64, ctypes.POINTER(Outcome)]
+    return function
 
 
 def _address(array) -> int:

@@ -14,6 +14,7 @@ def test_bench_json_reports_every_figure_and_times_the_right_runs(fmu_paths, cap
     assert cli_main(["bench", "--stop", str(STOP), "--repeat", "1", "--json"]) == 0
     figures = json.loads(capsys.readouterr().out)
     assert figures["steps"] == round(STOP / figures["step"]) and figures["step"] == STEP
+    assert figures["master_loop"] in ("compiled", "python")
     for key in ("ours_feedthrough_us", "ours_feedthrough_whole_us", "ours_jacobi_us", "ours_jacobi_whole_us",
                 "floor_us", "oracle_us", "real_time_factor", "floor_ratio_to_ours", "oracle_ratio_to_ours",
                 "ours_jacobi_ratio_to_ours", "target_floor_plus_oracle_x1_5_us",

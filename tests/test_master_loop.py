@@ -36,15 +36,17 @@ STEP3 = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.
 
 
 class FakeSystem:
-    """Two fake FMUs, A (outputs a0 recorded, a1 connected to B's input) and B (output b0 recorded).
+    """Two fake FMUs: A (outputs a0, a1; a0 recorded in column 1) and B (inputs <- A.a1, A.a0; output
+    b0 recorded in column 0).
 
-    Plan per row: get A, set B <- A.a1, get B; then doStep A, doStep B.  A's outputs are
-    (row + 0.25, 2 row + 0.5) at its k-th getReal (k = row); B's output is its last input
+    Plan per row: get A, set B <- (A.a1, A.a0), get B; then doStep A, doStep B.  A's outputs are
+    (row + 0.25, 2 row + 0.5) at its k-th getReal (k = row); B's output is its last first input
     times 3.  ``fail`` = (call, row, status) makes that call return ``status`` at that row.
+    ``bound``, ``bound2``: the divergence bounds of B's two inputs.
     """
 
     def __init__(self, fmi_version: int, rows: int, fail=None, a1_override=None, bound=1e6, record_bounds=(1e6, 1e6),
-                 a0_override=None):
+                 a0_override=None, bound2=1e6):
         self.fmi_version, self.fail, self.a1_override, self.a0_override = fmi_version, fail, a1_override, a0_override
         self.trace = []
         self.row = {"getA": 0, "setB": 0, "getB": 0, "stepA": 0, "stepB": 0}
@@ -52,17 +54,17 @@ class FakeSystem:
         get_type, step_type = (GET3, STEP3) if fmi_version == 3 else (GET2, STEP2)
         self._callbacks = [get_type(self._get), get_type(self._set), step_type(self._step)]
         self.a_refs, self.a_values = (ctypes.c_uint * 2)(7, 8), (ctypes.c_double * 2)()
-        self.b_in_refs, self.b_in_values = (ctypes.c_uint * 1)(3), (ctypes.c_double * 1)()
+        self.b_in_refs, self.b_in_values = (ctypes.c_uint * 2)(3, 5), (ctypes.c_double * 2)()
         self.b_refs, self.b_values = (ctypes.c_uint * 1)(4), (ctypes.c_double * 1)()
-        self.sources = (ctypes.c_void_p * 1)(ctypes.addressof(self.a_values))
-        self.source_index = (ctypes.c_size_t * 1)(1)
-        self.bounds = (ctypes.c_double * 1)(bound)
+        self.sources = (ctypes.c_void_p * 2)(ctypes.addressof(self.a_values), ctypes.addressof(self.a_values))
+        self.source_index = (ctypes.c_size_t * 2)(1, 0)
+        self.bounds = (ctypes.c_double * 2)(bound, bound2)
         get_address, set_address, step_address = (ctypes.cast(c, ctypes.c_void_p).value for c in self._callbacks)
         actions = (master_loop.Action * 3)()
         for entry, (kind, instance, call, refs, values, first, recorded) in zip(actions, [
-                (master_loop.ACTION_READ, 1, get_address, self.a_refs, self.a_values, 0, 1),
+                (master_loop.ACTION_READ, 1, get_address, self.a_refs, self.a_values, 1, 1),
                 (master_loop.ACTION_WRITE, 2, set_address, self.b_in_refs, self.b_in_values, 0, 0),
-                (master_loop.ACTION_READ, 2, get_address, self.b_refs, self.b_values, 1, 1)]):
+                (master_loop.ACTION_READ, 2, get_address, self.b_refs, self.b_values, 0, 1)]):
             entry.kind, entry.fmi_version, entry.instance, entry.call = kind, fmi_version, instance, call
             entry.references, entry.count, entry.values = ctypes.addressof(refs), len(values), ctypes.addressof(values)
             entry.first_column, entry.recorded = first, recorded
@@ -73,7 +75,7 @@ class FakeSystem:
         for entry, instance in zip(steppers, (1, 2)):
             entry.fmi_version, entry.instance, entry.do_step = fmi_version, instance, step_address
         self.actions, self.steppers = actions, steppers
-        self.record = np.full((rows, 2), -1.0)
+        self.record = np.full((rows + 1, 2), -1.0)  # one row more than run: a write past a row shows
         self.column_bounds = (ctypes.c_double * 2)(*record_bounds)
 
     def _status(self, call: str) -> int:
@@ -100,9 +102,9 @@ class FakeSystem:
         return self._status(f"get{name}")
 
     def _set(self, instance, references, count, values, *value_count):
-        assert instance == 2 and count == 1 and references[0] == 3
+        assert instance == 2 and count == 2 and (references[0], references[1]) == (3, 5)
         self.b_input = values[0]
-        self.trace.append(("setB", values[0]))
+        self.trace.append(("setB", values[0], values[1]))
         return self._status("setB")
 
     def _step(self, instance, time, step, no_prior_state, *outputs):
@@ -111,7 +113,7 @@ class FakeSystem:
         self.trace.append((f"step{name}", time, step))
         return self._status(f"step{name}")
 
-    def run(self, first_row: int, last_row: int, start=0.5, step=0.1, check_every=4) -> master_loop.Outcome:
+    def run(self, first_row: int, last_row: int, start=0.1, step=0.0005, check_every=4) -> master_loop.Outcome:
         function = master_loop.library("c")
         outcome = master_loop.Outcome()
         function(self.actions, 3, self.steppers, 2, start, step, first_row, last_row,
@@ -122,19 +124,22 @@ class FakeSystem:
 
 @pytest.mark.parametrize("fmi_version", [2, 3])
 def test_the_c_loop_makes_the_calls_of_the_python_loop_in_its_order(fmi_version):
-    system = FakeSystem(fmi_version, rows=6)
-    outcome = system.run(0, 5, start=0.5, step=0.1)
+    rows = 100  # start + n * step, not fma(n, step, start): 30 of these 100 times differ in the last bit
+    system = FakeSystem(fmi_version, rows=rows)
+    outcome = system.run(0, rows, start=0.1, step=0.0005)
     assert outcome.outcome == master_loop.LOOP_DONE
     expected = []
-    for n in range(5):
-        t = 0.5 + n * 0.1  # the time exactly as Python computes it
-        expected += [("getA", [7, 8]), ("setB", 2 * n + 0.5), ("getB", [4]), ("stepA", t, 0.1), ("stepB", t, 0.1)]
+    for n in range(rows):
+        t = 0.1 + n * 0.0005  # the time exactly as Python computes it
+        expected += [("getA", [7, 8]), ("setB", 2 * n + 0.5, n + 0.25), ("getB", [4]), ("stepA", t, 0.0005),
+                     ("stepB", t, 0.0005)]
     assert system.trace == expected
-    assert system.record[:5].tolist() == [[n + 0.25, 3 * (2 * n + 0.5)] for n in range(5)]
-    assert system.record[5].tolist() == [-1.0, -1.0]  # rows beyond the block untouched
+    assert system.record[:rows].tolist() == [[3 * (2 * n + 0.5), n + 0.25] for n in range(rows)]
+    assert system.record[rows].tolist() == [-1.0, -1.0]  # nothing written beyond the block
 
 
 @pytest.mark.parametrize("fmi_version", [2, 3])
+@pytest.mark.parametrize("status", [2, 3, 4])  # discard, error, fatal
 @pytest.mark.parametrize("call, outcome_kind, action, rows_recorded", [
     ("getA", master_loop.LOOP_READ_FAILED, 0, 2),
     ("setB", master_loop.LOOP_WRITE_FAILED, 1, 2),
@@ -142,20 +147,20 @@ def test_the_c_loop_makes_the_calls_of_the_python_loop_in_its_order(fmi_version)
     ("stepA", master_loop.LOOP_STEP_FAILED, 0, 3),
     ("stepB", master_loop.LOOP_STEP_FAILED, 1, 3),
 ])
-def test_an_fmi_error_stops_the_block_where_the_python_loop_stops(fmi_version, call, outcome_kind, action,
+def test_an_fmi_error_stops_the_block_where_the_python_loop_stops(fmi_version, status, call, outcome_kind, action,
                                                                    rows_recorded):
-    system = FakeSystem(fmi_version, rows=6, fail=(call, 2, 3))
+    system = FakeSystem(fmi_version, rows=6, fail=(call, 2, status))
     outcome = system.run(0, 6)
-    assert (outcome.outcome, outcome.row, outcome.action, outcome.status) == (outcome_kind, 2, action, 3)
+    assert (outcome.outcome, outcome.row, outcome.action, outcome.status) == (outcome_kind, 2, action, status)
     assert system.trace[-1][0] == call  # nothing is called after the failing call
     assert (system.record[:rows_recorded] != -1).all() and (system.record[rows_recorded:] == -1).all()
 
 
-@pytest.mark.parametrize("status", [1, 2])
-def test_a_warning_does_not_stop_the_loop_and_a_discard_does(status):
-    system = FakeSystem(2, rows=4, fail=("stepB", 1, status))
-    outcome = system.run(0, 4)
-    assert outcome.outcome == (master_loop.LOOP_DONE if status == 1 else master_loop.LOOP_STEP_FAILED)
+@pytest.mark.parametrize("call", ["getA", "setB", "getB", "stepA", "stepB"])
+def test_a_warning_does_not_stop_the_loop(call):
+    system = FakeSystem(2, rows=4, fail=(call, 1, 1))
+    assert system.run(0, 4).outcome == master_loop.LOOP_DONE
+    assert len(system.trace) == 4 * 5
 
 
 @pytest.mark.parametrize("value", [float("nan"), float("inf"), 10.0, -10.0])
@@ -168,9 +173,17 @@ def test_a_value_beyond_its_bound_never_reaches_the_input(value):
     assert all(entry[1] == entry[1] and abs(entry[1]) < 10 for entry in system.trace if entry[0] == "setB")
 
 
+def test_every_input_of_a_write_is_checked_against_its_own_bound():
+    # B's second input (A.a0 = row + 0.25) has bound 3.5: row 4 (4.25) stops; the first input's bound is 1e6
+    system = FakeSystem(2, rows=8, bound2=3.5)
+    outcome = system.run(0, 8)
+    assert (outcome.outcome, outcome.row, outcome.action, outcome.copy, outcome.value) == (
+        master_loop.LOOP_WRITE_DIVERGED, 3 + 1, 1, 1, 4.25)
+
+
 def test_a_recorded_value_beyond_its_bound_stops_at_the_end_of_its_check_block():
     # a0 = row + 0.25 passes 5 at row 5; with blocks of 4 rows the check at the end of rows 4..7 finds it
-    system = FakeSystem(2, rows=10, record_bounds=(5.0, 1e6))
+    system = FakeSystem(2, rows=10, record_bounds=(1e6, 5.0))
     outcome = system.run(0, 10, check_every=4)
     assert (outcome.outcome, outcome.row) == (master_loop.LOOP_RECORD_DIVERGED, 7)
     assert [entry[0] for entry in system.trace[-3:]] == ["getA", "setB", "getB"]  # row 7 not stepped
@@ -178,7 +191,7 @@ def test_a_recorded_value_beyond_its_bound_stops_at_the_end_of_its_check_block()
 
 @pytest.mark.parametrize("row, stop_row", [(3, 3), (4, 7), (7, 7), (8, None)])
 def test_every_row_of_a_check_block_is_checked(row, stop_row):
-    system = FakeSystem(2, rows=9, record_bounds=(50.0, 1e6), a0_override=(row, float("nan")))
+    system = FakeSystem(2, rows=9, record_bounds=(1e6, 50.0), a0_override=(row, 1e300), bound2=float("inf"))
     outcome = system.run(0, 9, check_every=4)
     if stop_row is None:  # row 8 starts a block that has not ended
         assert outcome.outcome == master_loop.LOOP_DONE
@@ -254,18 +267,80 @@ def _failing(kind: str):
         return dataclasses.replace(base, bounds={**base.bounds, "controller.u": 3.0})
     if kind == "record":  # theta1 (recorded, not connected) beyond its bound
         return dataclasses.replace(base, bounds={**base.bounds, "controller.theta1": 0.05})
+    if kind == "third input":  # ym, the third of the controller's four inputs, beyond its own bound
+        return dataclasses.replace(base, bounds={**base.bounds, "reference.ym": 0.2})
     # the plant's doStep fails: a learning rate that throws the loop out at once, no bounds to stop it first
     inf = float("inf")
     return dataclasses.replace(base.with_parameter("controller.gamma", 1e300), divergence_bound=inf,
                                bounds={"plant.y": inf, "controller.u": inf})
 
 
-@pytest.mark.parametrize("kind, cause, rows", [("write", "Divergence", 74), ("record", "Divergence", 64),
-                                               ("step", "FmiError", 3)])
-def test_a_failing_run_fails_alike_with_either_loop(native_fmus, kind, cause, rows):
+@pytest.mark.parametrize("kind, message, rows", [
+    ("write", "controller.u = -3.0857 beyond its bound 3 (on its way to plant.u)", 74),
+    ("record", "controller.theta1 = -0.0554221 beyond its bound 0.05;", 64),
+    ("third input", "reference.ym = 0.200034 beyond its bound 0.2 (on its way to controller.ym)", 784),
+    ("step", "plant: fmi2DoStep returned error at t = 0.001", 3)])
+def test_a_failing_run_fails_alike_with_either_loop(native_fmus, kind, message, rows):
     python, compiled = _both_loops(_failing(kind), "feedthrough", native_fmus)
-    assert python[0] == "failed" and python[1].rows == rows, python[2]
+    assert python[0] == "failed" and python[1].rows == rows and message in python[2], python[2]
     _assert_same(python, compiled)
+
+
+def test_an_fmi3_failure_names_the_fmi3_function(native3_fmus):
+    python, compiled = _both_loops(_failing("step"), "feedthrough", native3_fmus)
+    assert python[0] == "failed" and "plant: fmi3DoStep returned error at t = 0.001" in python[2], python[2]
+    _assert_same(python, compiled)
+
+
+class _FailingComponent:
+    """Stands for a Component in _raise_stop: records how it is failed."""
+
+    def __init__(self, name):
+        self.name, self.failed = name, None
+
+    def fail(self, function, status, time):
+        self.failed = (function, status, time)
+        raise RuntimeError(f"{self.name}: {function}")
+
+
+@pytest.mark.parametrize("kind, function, rows_kept", [
+    (master_loop.LOOP_READ_FAILED, "fmi2GetReal", 5), (master_loop.LOOP_WRITE_FAILED, "fmi2SetReal", 5),
+    (master_loop.LOOP_STEP_FAILED, "fmi2DoStep", 6)])
+def test_what_stops_the_compiled_loop_is_raised_as_the_python_loop_raises_it(kind, function, rows_kept):
+    scenario = scenarios.configure("pendulum_case1", "vud", None, 0.01)
+    master = Master(scenario, loop="python")
+    plan = [dataclasses.make_dataclass("Action", ["component"])(_FailingComponent(f"action{i}")) for i in range(3)]
+    components = [_FailingComponent(f"stepper{i}") for i in range(3)]
+    outcome = master_loop.Outcome(outcome=kind, status=2, row=5, action=1)
+    with pytest.raises(RuntimeError):
+        master._raise_stop(outcome, plan, components, record=None)
+    failed = components[1] if kind == master_loop.LOOP_STEP_FAILED else plan[1].component
+    assert failed.failed == (function, 2, scenario.start + 5 * scenario.step)
+    assert master.rows_done == rows_kept  # a failed read or write: row 5 is not recorded; a failed step: it is
+
+
+@pytest.mark.parametrize("every", [-1, 1.5, True])
+def test_a_bad_progress_interval_is_refused_before_anything_runs(every):
+    with pytest.raises(ValueError, match="progress_every = .*: a whole number of steps >= 0"):
+        Master(scenarios.configure("pendulum_case1", "vud", None, 0.01), loop="c").run(progress_every=every)
+
+
+def test_auto_falls_back_to_the_python_loop_when_the_library_cannot_be_built(monkeypatch, capsys):
+    import build_native
+
+    def broken(*args, **kwargs):
+        raise build_native.NativeBuildError("compiling master_loop failed:\nerror: no space left")
+
+    monkeypatch.setattr(master_loop, "_library", None)
+    monkeypatch.setattr(master_loop, "_unavailable", None)
+    monkeypatch.setattr(build_native, "host_library", broken)
+    monkeypatch.delenv(master_loop.ENVIRONMENT_SWITCH, raising=False)
+    assert master_loop.library() is None
+    assert capsys.readouterr().err == ("warning: the master runs its Python loop: the compiled loop master_loop.c "
+                                       "cannot be built or loaded: compiling master_loop failed:\n")
+    assert master_loop.library() is None and capsys.readouterr().err == ""  # said once
+    with pytest.raises(master_loop.LoopUnavailable, match="AFC_MASTER_LOOP=c: the compiled loop master_loop.c"):
+        master_loop.library("c")
 
 
 def test_the_loop_can_be_chosen(monkeypatch):
