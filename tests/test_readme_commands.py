@@ -284,11 +284,13 @@ def _not_ignored(paths) -> list:
     return sorted(p for p in paths if p not in ignored)
 
 
-def _environment(work: Path) -> dict:
+def _environment(work: Path, scratch: Path) -> dict:
     environment = dict(os.environ)
     environment["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), environment.get("PATH", "")])
     environment["PYTHONPATH"] = str(work)
     environment.pop("MPLBACKEND", None)
+    scratch.mkdir(exist_ok=True)  # what a block's programs leave in the temporary folder (Ecos's ecos_ssp_*)
+    environment["TMPDIR"] = str(scratch)  # stays in the test's own tmp_path
     return environment
 
 
@@ -311,7 +313,7 @@ def test_readme_block_runs_as_written(block, workspace, tmp_path):
     lines = []
     for number, command in enumerate(commands):
         lines += ["{", command.text, f'}} > "{logs}/{number}.out" 2>&1', f'echo $? > "{logs}/{number}.rc"']
-    completed = subprocess.run(["bash", "-c", "\n".join(lines)], cwd=workspace, env=_environment(workspace),
+    completed = subprocess.run(["bash", "-c", "\n".join(lines)], cwd=workspace, env=_environment(workspace, tmp_path / "tmp"),
                                timeout=block.timeout, capture_output=True, text=True)
     assert completed.returncode == 0, completed.stderr
     everything = []
