@@ -33,11 +33,11 @@
 #define HOST_ROBUST 0
 #endif
 
-/* the internal state (STATE_ATTRIBUTES: latch, chatter, P, xi) */
+/* the internal state (STATE_ATTRIBUTES: latch, chatter, xi; the Python edition's _p) */
 typedef struct {
     InitialErrorLatch latch;        /* x(t0) = e(0), de(0), ... and t0 (Remark 3) */
     ChatterMonitor chatter;         /* chatter statistic of u */
-    double p[MAX_ORDER][MAX_ORDER]; /* P of (30) */
+    ControllerParameters p;         /* the constants of the per-step path, P B, the latch's Remark 3 */
     double xi[MAX_RULES];           /* the basis (8) at the last output evaluation */
 } ControllerState;
 
@@ -164,16 +164,45 @@ static void restart_adaptation(ModelInstance *m) {
     V(m, w_hat) = 0.0;
 }
 
+/* the constants of the per-step path from the parameters (the Python edition's _configure, which
+ * calls afc_math.controller_parameters); returns -1 if (30) has no solution */
+static int configure(ModelInstance *m) {
+    ControllerParameters *p = &STATE(m)->p;
+    const double *values = m->s->values;
+    int n = order_of(m), sets = sets_of(m);
+    double k[MAX_ORDER], q[MAX_ORDER], matrix[MAX_ORDER][MAX_ORDER];
+    p->order = n;
+    p->sets = sets;
+    p->rules = rules_of(n, sets);
+    p->variant = (int)V(m, variant);
+    p->fls_input = (int)V(m, fls_input);
+    p->lambda_e = V(m, lambda_e);
+    p->lambda_ce = V(m, lambda_ce);
+    p->mf_slope = V(m, mf_slope);
+    for (int i = 0; i < n; i++) {
+        k[i] = values[VRS_k[i]];
+        q[i] = values[VRS_q[i]];
+        p->kappa[i] = values[VRS_kappa[i]];
+        p->universe[i] = values[VRS_E[i]];
+        membership_boundaries(p->universe[i], sets, p->boundaries[i]);
+    }
+    if (lyapunov_p(n, k, q, matrix) != 0) return -1;
+    for (int i = 0; i < n; i++) p->p_b[i] = matrix[i][n - 1];
+    return 0;
+}
+
+/* e(t0), de(t0), ..., e^(n-1)(t0) and t0 of the modified error (36), from the latch rule's state */
+static void latch_initial_error(ModelInstance *m) {
+    ControllerState *state = STATE(m);
+    latch_error(&state->p, state->latch.latched, state->latch.origin);
+}
+
 int model_initialize(ModelInstance *m, double start_time) {
     ControllerState *state = STATE(m);
     int n = order_of(m);
-    double k[MAX_ORDER], q[MAX_ORDER], sample[MAX_ORDER];
-    for (int i = 0; i < n; i++) {
-        k[i] = m->s->values[VRS_k[i]];
-        q[i] = m->s->values[VRS_q[i]];
-        sample[i] = m->s->values[ERROR_VR[i]];
-    }
-    if (lyapunov_p(n, k, q, state->p) != 0)
+    double sample[MAX_ORDER];
+    for (int i = 0; i < n; i++) sample[i] = m->s->values[ERROR_VR[i]];
+    if (configure(m) != 0)
         return fmu_fail(m, "the Lyapunov equation (30) has no solution for these k: "
                         "s^n + k1 s^(n-1) + ... + kn must be Hurwitz");
 #if HOST_ROBUST
@@ -188,6 +217,7 @@ int model_initialize(ModelInstance *m, double start_time) {
 #else
     latch_pin(&state->latch, n, start_time, sample); /* latched once (Remark 3) */
 #endif
+    latch_initial_error(m);
     restart_adaptation(m);
     return MODEL_OK;
 }
@@ -196,27 +226,15 @@ int model_compute_outputs(ModelInstance *m) {
     REPRS;
     ControllerState *state = STATE(m);
     const double *values = m->s->values;
-    int n = order_of(m), sets = sets_of(m);
-    double e[MAX_ORDER], ym[MAX_ORDER], error[MAX_ORDER], x[MAX_ORDER], alpha[MAX_ORDER], z[MAX_ORDER];
-    double universe[MAX_ORDER];
+    const ControllerParameters *p = &state->p;
+    int n = p->order, rules = p->rules;
+    double e[MAX_ORDER], ym[MAX_ORDER], error[MAX_ORDER], alpha[MAX_ORDER], theta[MAX_RULES], xi[MAX_RULES];
     for (int i = 0; i < n; i++) {
         e[i] = values[ERROR_VR[i]];
         ym[i] = values[REFERENCE_VR[i]];
-        universe[i] = values[VRS_E[i]];
     }
-    modified_error(n, e, m->s->time - state->latch.origin, state->latch.latched, V(m, lambda_e), error);
-    int fls_input = (int)V(m, fls_input);
-    fls_inputs(n, e, ym, error, fls_input, x);
-    int variant = (int)V(m, variant);
-    for (int i = 0; i < n; i++) {
-        alpha[i] = variant == VARIANT_VUD ? contraction_factor(x[i], V(m, lambda_ce), values[VRS_kappa[i]]) : 1.0;
-        z[i] = normalized_input(x[i], alpha[i], universe[i]);
-    }
-    double xi[MAX_RULES];
-    int rules = fuzzy_basis(n, sets, z, universe, V(m, mf_slope), xi);
-    double u = values[VRS_theta[0]] * xi[0]; /* [9] */
-    for (int j = 1; j < rules; j++) u += values[VRS_theta[j]] * xi[j];
-    if (variant == VARIANT_FAE) u += V(m, w_hat);
+    for (int j = 0; j < rules; j++) theta[j] = values[VRS_theta[j]];
+    double u = controller_output(e, ym, m->s->time, theta, V(m, w_hat), p, error, alpha, xi); /* [9] */
     int finite = isfinite(u);
     for (int i = 0; i < n; i++) finite = finite && isfinite(error[i]);
     if (!finite) {
@@ -253,6 +271,7 @@ static int watch_initial_error(ModelInstance *m, double time) {
     for (int i = 0; i < n; i++) sample[i] = m->s->values[ERROR_VR[i]];
     int events = latch_observe(&state->latch, time, sample);
     if (events & LATCH_RELATCHED) {
+        latch_initial_error(m);
         restart_adaptation(m);
         if (model_compute_outputs(m) != MODEL_OK) return MODEL_ERROR; /* E, dE, xi from the new latch */
     }
@@ -271,20 +290,17 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     if (state->latch.open != 0.0 && watch_initial_error(m, current_time) != MODEL_OK) return MODEL_ERROR;
 #endif
     double *values = m->s->values;
-    int n = order_of(m), rules = rules_of(n, sets_of(m));
-    double error[MAX_ORDER];
+    const ControllerParameters *p = &state->p;
+    int n = p->order, rules = p->rules;
+    double error[MAX_ORDER], theta[MAX_RULES], adapted[MAX_RULES];
     for (int i = 0; i < n; i++) error[i] = values[MODIFIED_ERROR_VR[i]];
-    double tau = adaptation_signal(n, error, state->p);
-    double gamma = V(m, gamma), m_theta = V(m, m_theta), delta = V(m, delta);
-    double theta[MAX_RULES];
+    for (int j = 0; j < rules; j++) theta[j] = values[VRS_theta[j]];
+    double tau = adaptation_signal(n, error, p->p_b); /* [31] */
+    adapted_weights(rules, theta, tau, state->xi, V(m, gamma), V(m, m_theta), V(m, delta), step_size, adapted);
     int finite = 1;
-    for (int j = 0; j < rules; j++) {
-        double theta_j = values[VRS_theta[j]];
-        theta[j] = theta_j + step_size * projected_rate(theta_j, tau, state->xi[j], gamma, m_theta, delta);
-        finite = finite && isfinite(theta[j]);
-    }
+    for (int j = 0; j < rules; j++) finite = finite && isfinite(adapted[j]);
     double w_hat = V(m, w_hat);
-    if ((int)V(m, variant) == VARIANT_FAE) w_hat += step_size * V(m, gamma_w) * tau;
+    if (p->variant == VARIANT_FAE) w_hat += step_size * V(m, gamma_w) * tau;
     if (!(finite && isfinite(w_hat))) {
         if (n == 2)
             return fmu_fail(m, "adaptation diverged in doStep(t=%s, h=%s): tau = %s from E = %s, dE = %s; theta "
@@ -294,7 +310,7 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
                         "keep their values at t; the inputs are out of range or the closed loop diverged",
                         R(current_time), R(step_size), R(tau), R(error[0]));
     }
-    for (int j = 0; j < rules; j++) values[VRS_theta[j]] = theta[j];
+    for (int j = 0; j < rules; j++) values[VRS_theta[j]] = adapted[j];
     V(m, w_hat) = w_hat;
 #if HOST_ROBUST
     if (chatter_update(&state->chatter, V(m, u), step_size)) {

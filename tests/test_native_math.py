@@ -1,16 +1,35 @@
 """The controller's math in C (fmu_src/afc_math.c) through ctypes: P against scipy, the
-memberships and basis, Remark 3 for every order n = 1..4 and m = 2..5 (issue 17)."""
+memberships and basis, Remark 3 for every order n = 1..4 and m = 2..5 (issue 17), and every
+C function against its Python twin in fmu_src/afc_math.py, bit for bit (issue 16)."""
 import ctypes
 import math
 import platform
+import random
+import struct
 
 import numpy as np
 import pytest
 
 import build_native
+from fmu_src import afc_math
 
 MAX_ORDER = 4
+MAX_SETS = 5
+MAX_BOUNDARIES = MAX_SETS - 1
+MAX_RULES = 625
 Matrix = (ctypes.c_double * MAX_ORDER) * MAX_ORDER
+Boundaries = (ctypes.c_double * MAX_BOUNDARIES) * MAX_ORDER
+double_p = ctypes.POINTER(ctypes.c_double)
+
+
+class ControllerParameters(ctypes.Structure):
+    """afc_math.h's ControllerParameters: the C form of afc_math.controller_parameters' dict."""
+    _fields_ = [("lambda_e", ctypes.c_double), ("lambda_ce", ctypes.c_double), ("mf_slope", ctypes.c_double),
+                ("kappa", ctypes.c_double * MAX_ORDER), ("universe", ctypes.c_double * MAX_ORDER),
+                ("boundaries", Boundaries), ("p_b", ctypes.c_double * MAX_ORDER),
+                ("error0", ctypes.c_double * MAX_ORDER), ("t0", ctypes.c_double), ("remark3", Matrix),
+                ("order", ctypes.c_int), ("sets", ctypes.c_int), ("rules", ctypes.c_int),
+                ("variant", ctypes.c_int), ("fls_input", ctypes.c_int)]
 
 pytestmark = [
     pytest.mark.skipif(not build_native.compiler_available(), reason="zig's C compiler is not installed"),
@@ -19,18 +38,42 @@ pytestmark = [
 ]
 
 
+SIGNATURES = {  # name: (restype, argtypes)
+    "lyapunov_p": (ctypes.c_int, [ctypes.c_int, double_p, double_p, ctypes.POINTER(Matrix)]),
+    "is_positive_definite": (ctypes.c_int, [ctypes.c_int, ctypes.POINTER(Matrix)]),
+    "contraction_factor": (ctypes.c_double, [ctypes.c_double] * 3),
+    "normalized_input": (ctypes.c_double, [ctypes.c_double] * 3),
+    "sigmoid": (ctypes.c_double, [ctypes.c_double]),
+    "membership_high": (ctypes.c_double, [ctypes.c_double] * 2),
+    "membership_low": (ctypes.c_double, [ctypes.c_double] * 2),
+    "membership_boundaries": (None, [ctypes.c_double, ctypes.c_int, double_p]),
+    "memberships": (None, [ctypes.c_int, ctypes.c_double, ctypes.c_double, double_p, double_p]),
+    "fuzzy_basis": (ctypes.c_int, [ctypes.c_int, ctypes.c_int, double_p, ctypes.c_double, ctypes.POINTER(Boundaries),
+                                   double_p]),
+    "remark3_coefficients": (None, [ctypes.c_int, double_p, ctypes.c_double, double_p]),
+    "remark3_polynomials": (None, [ctypes.c_int, double_p, ctypes.POINTER(Matrix)]),
+    "remark3_offset": (None, [ctypes.c_int, ctypes.POINTER(Matrix), ctypes.c_double, ctypes.c_double, double_p]),
+    "modified_error": (None, [ctypes.c_int, double_p, ctypes.c_double, double_p, ctypes.c_double, ctypes.c_double,
+                              ctypes.POINTER(Matrix), double_p]),
+    "adaptation_signal": (ctypes.c_double, [ctypes.c_int, double_p, double_p]),
+    "projected_rate": (ctypes.c_double, [ctypes.c_double] * 6),
+    "adapted_weights": (None, [ctypes.c_int, double_p, ctypes.c_double, double_p, ctypes.c_double, ctypes.c_double,
+                               ctypes.c_double, ctypes.c_double, double_p]),
+    "fls_inputs": (None, [ctypes.c_int, double_p, double_p, double_p, ctypes.c_int, double_p]),
+    "contraction_factors": (None, [ctypes.c_int, double_p, ctypes.c_double, double_p, double_p]),
+    "normalized_inputs": (None, [ctypes.c_int, double_p, double_p, double_p, double_p]),
+    "latch_error": (None, [ctypes.POINTER(ControllerParameters), double_p, ctypes.c_double]),
+    "controller_output": (ctypes.c_double, [double_p, double_p, ctypes.c_double, double_p, ctypes.c_double,
+                                            ctypes.POINTER(ControllerParameters), double_p, double_p, double_p]),
+}
+
+
 @pytest.fixture(scope="module")
 def afc():
     library = ctypes.CDLL(str(build_native.math_library()))
-    double_p = ctypes.POINTER(ctypes.c_double)
-    library.lyapunov_p.argtypes = [ctypes.c_int, double_p, double_p, ctypes.POINTER(Matrix)]
-    library.lyapunov_p.restype = ctypes.c_int
-    library.fuzzy_basis.argtypes = [ctypes.c_int, ctypes.c_int, double_p, double_p, ctypes.c_double, double_p]
-    library.fuzzy_basis.restype = ctypes.c_int
-    library.memberships.argtypes = [ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_int, double_p]
-    library.modified_error.argtypes = [ctypes.c_int, double_p, ctypes.c_double, double_p, ctypes.c_double, double_p]
-    library.adaptation_signal.argtypes = [ctypes.c_int, double_p, ctypes.POINTER(Matrix)]
-    library.adaptation_signal.restype = ctypes.c_double
+    for name, (restype, argtypes) in SIGNATURES.items():
+        function = getattr(library, name)
+        function.restype, function.argtypes = restype, argtypes
     return library
 
 
@@ -78,11 +121,18 @@ def test_a_singular_lyapunov_equation_is_reported(afc):
     assert status == -1
 
 
+def c_boundaries(afc, universe, sets):
+    boundaries = vector([0.0] * MAX_BOUNDARIES, MAX_BOUNDARIES)
+    afc.membership_boundaries(universe, sets, boundaries)
+    return boundaries
+
+
 @pytest.mark.parametrize("sets", [2, 3, 4, 5])
 def test_memberships_are_a_partition_of_unity(afc, sets):
     mu = vector([0.0] * 5, 5)
+    boundaries = c_boundaries(afc, 1.0, sets)
     for z in np.linspace(-1.2, 1.2, 41):
-        afc.memberships(z, 7.0, 1.0, sets, mu)
+        afc.memberships(sets, z, 7.0, boundaries, mu)
         values = list(mu)[:sets]
         assert math.isclose(sum(values), 1.0, rel_tol=0, abs_tol=1e-15)
         assert min(values) >= 0.0
@@ -91,7 +141,7 @@ def test_memberships_are_a_partition_of_unity(afc, sets):
 def test_two_sets_are_the_papers_pair(afc):
     mu = vector([0.0] * 5, 5)
     for z in (-0.7, -0.1, 0.0, 0.3, 1.0):
-        afc.memberships(z, 7.0, math.pi / 3, 2, mu)
+        afc.memberships(2, z, 7.0, c_boundaries(afc, math.pi / 3, 2), mu)
         assert mu[1] == 1.0 / (1.0 + math.exp(-7.0 * z)) or mu[1] == math.exp(7.0 * z) / (1.0 + math.exp(7.0 * z))
         assert mu[0] + mu[1] == pytest.approx(1.0, abs=1e-16)
 
@@ -101,14 +151,17 @@ def test_two_sets_are_the_papers_pair(afc):
 def test_the_basis_has_m_to_the_n_rules_summing_to_one(afc, order, sets):
     z = vector([0.3, -0.2, 0.05, -0.9][:order])
     universe = vector([1.0, 0.8, 1.2, 1.0])
-    xi = (ctypes.c_double * 625)()
-    rules = afc.fuzzy_basis(order, sets, z, universe, 7.0, xi)
+    boundaries = Boundaries()
+    for i in range(MAX_ORDER):
+        afc.membership_boundaries(universe[i], sets, boundaries[i])
+    xi = (ctypes.c_double * MAX_RULES)()
+    rules = afc.fuzzy_basis(order, sets, z, 7.0, ctypes.byref(boundaries), xi)
     assert rules == sets ** order
     assert math.isclose(sum(xi[:rules]), 1.0, abs_tol=1e-14)
     # l1 slowest: the first rule is mu_1(z1) ... mu_1(zn), the second changes only the last input
     mu = [vector([0.0] * 5, 5) for _ in range(order)]
     for i in range(order):
-        afc.memberships(z[i], 7.0, universe[i], sets, mu[i])
+        afc.memberships(sets, z[i], 7.0, boundaries[i], mu[i])
     assert xi[0] == pytest.approx(math.prod(mu[i][0] for i in range(order)), rel=1e-15)
     assert xi[1] == pytest.approx(math.prod(mu[i][0] for i in range(order - 1)) * mu[order - 1][1], rel=1e-15)
 
@@ -124,7 +177,7 @@ def test_remark3_modified_error_starts_at_zero_with_all_its_derivatives(afc, ord
 
     e0 = vector(e_vector(0.0))
     out = vector([0.0] * 4)
-    afc.modified_error(order, e0, 0.0, e0, lam, out)
+    afc.modified_error(order, e0, 0.0, e0, 0.0, lam, None, out)
     assert all(abs(out[i]) <= 1e-15 for i in range(order))
     # E^(i+1) is the time derivative of E^(i) (central differences)
     h = 1e-5
@@ -132,7 +185,7 @@ def test_remark3_modified_error_starts_at_zero_with_all_its_derivatives(afc, ord
         values = []
         for s in (t - h, t + h, t):
             result = vector([0.0] * 4)
-            afc.modified_error(order, vector(e_vector(s)), s, e0, lam, result)
+            afc.modified_error(order, vector(e_vector(s)), s, e0, 0.0, lam, None, result)
             values.append(list(result)[:order])
         for i in range(order - 1):
             derivative = (values[1][i] - values[0][i]) / (2 * h)
@@ -141,12 +194,8 @@ def test_remark3_modified_error_starts_at_zero_with_all_its_derivatives(afc, ord
 
 def test_tau_is_the_last_column_of_p_times_e(afc):
     status, p = c_lyapunov(afc, (2.0, 1.0, 0.5), (10.0, 10.0, 10.0))
-    matrix = Matrix()
-    for i in range(3):
-        for j in range(3):
-            matrix[i][j] = p[i, j]
     error = [0.3, -0.2, 0.1]
-    assert afc.adaptation_signal(3, vector(error), ctypes.byref(matrix)) == pytest.approx(float(np.dot(error, p[:, 2])))
+    assert afc.adaptation_signal(3, vector(error), vector(p[:, 2])) == pytest.approx(float(np.dot(error, p[:, 2])))
 
 
 # ------------------------------------------- host robustness (issue 13) in C
@@ -224,3 +273,258 @@ def test_the_chatter_monitor_reads_a_sines_frequency_and_warns_once_above_20_hz(
         message = ctypes.create_string_buffer(2048)
         afc.chatter_warning(ctypes.byref(state), ctypes.c_double(h), message, 2048)
         assert message.value.decode().startswith("u chatters with communication step 0.0001 s: over the last ~1 s")
+
+
+# ------------------------------------- every C function against its Python twin, bit for bit
+def bits(values):
+    """The IEEE bytes of each number (-0.0 != 0.0, NaN == NaN of the same payload)."""
+    if isinstance(values, float):
+        values = (values,)
+    return [struct.pack("<d", value) for value in values]
+
+
+def c_matrix(rows):
+    matrix = Matrix()
+    for i, row in enumerate(rows):
+        for j, value in enumerate(row):
+            matrix[i][j] = value
+    return matrix
+
+
+def c_boundary_table(boundaries):
+    table = Boundaries()
+    for i, row in enumerate(boundaries):
+        for l, value in enumerate(row):
+            table[i][l] = value
+    return table
+
+
+SHAPES = [(n, m) for n in (1, 2, 3, 4) for m in (2, 3, 4, 5) if m ** n <= afc_math.RULES_MAX]
+ARGUMENTS = (0.0, -0.0, 1e-300, -2.5e-17, 0.3, -0.7, 1.0471975511965976, -3.0, 40.0, -800.0, 1e300)
+
+
+def test_scalar_twins_give_the_same_bits(afc):
+    """sigmoid, membership_high/low, contraction_factor, normalized_input, projected_rate."""
+    rng = random.Random(16)
+    samples = list(ARGUMENTS) + [rng.uniform(-50.0, 50.0) for _ in range(200)]
+    for a in samples:
+        assert bits(afc.sigmoid(a)) == bits(afc_math.sigmoid(a)), a
+        for slope in (7.0, 1.5):
+            assert bits(afc.membership_high(a, slope)) == bits(afc_math.membership_high(a, slope)), a
+            assert bits(afc.membership_low(a, slope)) == bits(afc_math.membership_low(a, slope)), a
+        for lambda_ce, kappa in ((0.99, 10.0), (0.4, 0.3)):
+            alpha = afc_math.contraction_factor(a, lambda_ce, kappa)
+            assert bits(afc.contraction_factor(a, lambda_ce, kappa)) == bits(alpha), a
+            for universe in (math.pi / 3, 0.25):
+                assert bits(afc.normalized_input(a, alpha, universe)) == bits(afc_math.normalized_input(a, alpha,
+                                                                                                           universe))
+
+
+def test_projected_rate_is_the_python_one_on_both_sides_of_the_bound(afc):
+    rng = random.Random(31)
+    for theta in (-260.0, -203.0, -200.0, -12.5, 0.0, 150.0, 200.0, 201.5, 330.0):
+        for tau in (-0.8, -0.0, 0.0, 1e-3, 2.2):
+            xi = rng.uniform(0.0, 1.0)
+            args = (theta, tau, xi, 300.0, 200.0, 5.0)
+            assert bits(afc.projected_rate(*args)) == bits(afc_math.projected_rate(*args)), args
+
+
+@pytest.mark.parametrize("sets", [2, 3, 4, 5])
+def test_boundaries_and_memberships_are_the_python_ones(afc, sets):
+    rng = random.Random(sets)
+    for universe in (math.pi / 3, 0.9, 2.5):
+        expected = afc_math.membership_boundaries(universe, sets)
+        boundaries = c_boundaries(afc, universe, sets)
+        assert bits(list(boundaries)[:sets - 1]) == bits(expected)
+        mu = vector([0.0] * MAX_SETS, MAX_SETS)
+        for z in [rng.uniform(-1.3 * universe, 1.3 * universe) for _ in range(40)] + list(expected):
+            afc.memberships(sets, z, 7.0, boundaries, mu)
+            assert bits(list(mu)[:sets]) == bits(afc_math.memberships(z, 7.0, expected)), (universe, z)
+
+
+@pytest.mark.parametrize("order,sets", SHAPES)
+def test_the_basis_is_the_python_one(afc, order, sets):
+    rng = random.Random(order * 10 + sets)
+    universe = (1.2, math.pi / 3, 0.7, 2.0)[:order]  # a different universe per input
+    boundaries = tuple(afc_math.membership_boundaries(e, sets) for e in universe)
+    table = c_boundary_table(boundaries)
+    xi = (ctypes.c_double * MAX_RULES)()
+    for _ in range(10):
+        z = tuple(rng.uniform(-e, e) for e in universe)
+        slope = rng.choice((7.0, 2.5))
+        assert afc.fuzzy_basis(order, sets, vector(z), slope, ctypes.byref(table), xi) == sets ** order
+        assert bits(xi[:sets ** order]) == bits(afc_math.fuzzy_basis(z, slope, boundaries))
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 4])
+def test_remark3_is_the_python_one(afc, order):
+    """remark3_coefficients, remark3_polynomials, remark3_offset and modified_error (with the
+    per-latch polynomials and without them), asymmetric e(t0), t0 != 0, lambda_e = 0 too."""
+    rng = random.Random(order)
+    for lambda_e in (5.0, 0.7, 13.0, 0.0):
+        error0 = tuple(rng.uniform(-1.0, 1.0) for _ in range(order))
+        t0 = rng.choice((0.0, 0.0123))
+        coefficients = afc_math.remark3_coefficients(error0, lambda_e)
+        c_coefficients = vector([0.0] * MAX_ORDER)
+        afc.remark3_coefficients(order, vector(error0), lambda_e, c_coefficients)
+        assert bits(c_coefficients[:order]) == bits(coefficients)
+        polynomials = afc_math.remark3_polynomials(coefficients)
+        c_polynomials = Matrix()
+        afc.remark3_polynomials(order, c_coefficients, ctypes.byref(c_polynomials))
+        for j in range(order):
+            assert bits(c_polynomials[j][:order - j]) == bits(polynomials[j]), j
+        out = vector([0.0] * MAX_ORDER)
+        for elapsed in (0.0, 1e-4, 0.37, 2.0, 30.0):
+            afc.remark3_offset(order, ctypes.byref(c_polynomials), elapsed, lambda_e, out)
+            assert bits(out[:order]) == bits(afc_math.remark3_offset(polynomials, elapsed, lambda_e)), elapsed
+            error = tuple(rng.uniform(-1.0, 1.0) for _ in range(order))
+            t = t0 + elapsed
+            expected = bits(afc_math.modified_error(error, t, error0, t0, lambda_e, polynomials))
+            assert bits(afc_math.modified_error(error, t, error0, t0, lambda_e)) == expected
+            afc.modified_error(order, vector(error), t, vector(error0), t0, lambda_e, ctypes.byref(c_polynomials), out)
+            assert bits(out[:order]) == expected
+            afc.modified_error(order, vector(error), t, vector(error0), t0, lambda_e, None, out)
+            assert bits(out[:order]) == expected
+
+
+THETA_POOL = (203.0, -240.0, 199.9, -200.0, 450.0, 0.0, -203.0, 200.0, -12.0, 240.0, -450.0, 12.0, -0.0)  # M_theta 200
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 4])
+def test_the_adaptation_is_the_python_one(afc, order):
+    """tau = E^T P B with p12 != p22, and the Euler step of theta with theta beyond +-M_theta
+    (the projection active and inactive), M = 2..625 rules."""
+    rng = random.Random(100 + order)
+    k = ((3.0,), (3.0, 2.0), (3.0, 3.0, 1.0), (4.0, 6.0, 4.0, 1.0))[order - 1]
+    q = (7.0, 4.0, 2.0, 9.0)[:order]
+    p_b = tuple(row[order - 1] for row in afc_math.lyapunov_p(k, q))
+    assert len(set(p_b)) == order  # asymmetric
+    for error in [tuple(rng.uniform(-1.0, 1.0) for _ in range(order)) for _ in range(20)] + [(-0.0,) * order]:
+        tau = afc_math.adaptation_signal(error, p_b)
+        assert bits(afc.adaptation_signal(order, vector(error), vector(p_b))) == bits(tau), error
+    for rules in sorted({2, 4, 5 ** order if order < 4 else 625, 3 ** order}):
+        theta = [THETA_POOL[j % len(THETA_POOL)] for j in range(rules)]
+        xi = [rng.uniform(0.0, 1.0) for _ in range(rules)]
+        adapted = (ctypes.c_double * MAX_RULES)()
+        for tau in (-0.9, 0.0, 0.45):
+            expected = afc_math.adapted_weights(theta, tau, xi, 300.0, 200.0, 5.0, 1e-3)
+            afc.adapted_weights(rules, vector(theta, rules), tau, vector(xi, rules), 300.0, 200.0, 5.0, 1e-3, adapted)
+            assert bits(adapted[:rules]) == bits(expected), (rules, tau)
+        assert any(abs(value) > 200.0 for value in theta)
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 4])
+def test_the_fls_input_vector_alpha_and_z_are_the_python_ones(afc, order):
+    rng = random.Random(200 + order)
+    kappa = (10.0, 3.0, 0.5, 22.0)[:order]
+    universe = (1.2, math.pi / 3, 0.7, 2.0)[:order]
+    x, alpha, z = (vector([0.0] * MAX_ORDER) for _ in range(3))
+    for _ in range(20):
+        error, reference, modified = (tuple(rng.uniform(-2.0, 2.0) for _ in range(order)) for _ in range(3))
+        for fls_input in (afc_math.FLS_INPUT_ERROR, afc_math.FLS_INPUT_STATE):
+            expected = afc_math.fls_inputs(error, reference, modified, fls_input)
+            afc.fls_inputs(order, vector(error), vector(reference), vector(modified), fls_input, x)
+            assert bits(x[:order]) == bits(expected)
+            factors = afc_math.contraction_factors(expected, 0.99, kappa)
+            afc.contraction_factors(order, x, 0.99, vector(kappa), alpha)
+            assert bits(alpha[:order]) == bits(factors)
+            afc.normalized_inputs(order, x, alpha, vector(universe), z)
+            assert bits(z[:order]) == bits(afc_math.normalized_inputs(expected, factors, universe))
+
+
+def parameter_values(**changes):
+    import build_fmu
+
+    values = {v.name: v.start for v in build_fmu.model_class("AdaptiveFuzzyController").VARIABLES
+              if v.causality == "parameter"}
+    values.update(changes)
+    return values
+
+
+def c_parameters(p):
+    """The C struct of the Python dict p (the constants the FMU's configure sets; latch_error's
+    fields are left to the C latch_error)."""
+    c = ControllerParameters(lambda_e=p["lambda_e"], lambda_ce=p["lambda_ce"], mf_slope=p["mf_slope"],
+                             order=p["order"], sets=p["sets"], rules=p["rules"], variant=p["variant"],
+                             fls_input=p["fls_input"])
+    n = p["order"]
+    c.kappa[:n], c.universe[:n], c.p_b[:n] = p["kappa"], p["universe"], p["p_b"]
+    c.boundaries = c_boundary_table(p["boundaries"])
+    return c
+
+
+@pytest.mark.parametrize("order,sets", SHAPES)
+def test_latch_error_and_the_control_law_are_the_python_ones(afc, order, sets):
+    """latch_error (e(t0), t0, the Remark 3 polynomials) and controller_output (u, E, alpha, xi)
+    for the three variants and both FLS inputs, theta beyond +-M_theta, w_hat != 0."""
+    rng = random.Random(300 + 10 * order + sets)
+    for variant in (afc_math.VARIANT_VUD, afc_math.VARIANT_FIXED, afc_math.VARIANT_FAE):
+        fls_input = afc_math.FLS_INPUT_STATE if variant == afc_math.VARIANT_FIXED else afc_math.FLS_INPUT_ERROR
+        values = parameter_values(order=order, sets=sets, variant=variant, fls_input=fls_input, k1=4.0, k2=6.0,
+                                  k3=4.0, k4=1.0, q1=7.0, q2=4.0, q3=2.0, q4=9.0, kappa1=10.0, kappa2=3.0,
+                                  kappa3=0.5, kappa4=22.0, E1=1.2, E2=math.pi / 3, E3=0.7, E4=2.0, lambda_e=3.5)
+        error0 = tuple(rng.uniform(-0.5, 0.5) for _ in range(order))
+        p = afc_math.controller_parameters(values, error0, 0.02)
+        c = c_parameters(p)
+        afc.latch_error(ctypes.byref(c), vector(error0), 0.02)
+        assert bits(c.error0[:order]) == bits(p["error0"]) and c.t0 == p["t0"]
+        for j in range(order):
+            assert bits(c.remark3[j][:order - j]) == bits(p["remark3"][j])
+        rules = p["rules"]
+        modified, alpha, xi = vector([0.0] * MAX_ORDER), vector([0.0] * MAX_ORDER), (ctypes.c_double * MAX_RULES)()
+        for _ in range(5):
+            theta = [rng.uniform(-450.0, 450.0) for _ in range(rules)]
+            error, reference = (tuple(rng.uniform(-0.6, 0.6) for _ in range(order)) for _ in range(2))
+            t, w_hat = rng.uniform(0.02, 3.0), rng.uniform(-2.0, 2.0)
+            u, expected_modified, expected_alpha, expected_xi = afc_math.controller_output(
+                error, reference, t, theta, w_hat, p)
+            got = afc.controller_output(vector(error), vector(reference), t, vector(theta, rules), w_hat,
+                                        ctypes.byref(c), modified, alpha, xi)
+            assert bits(got) == bits(u), (variant, t)
+            assert bits(modified[:order]) == bits(expected_modified)
+            assert bits(alpha[:order]) == bits(expected_alpha)
+            assert bits(xi[:rules]) == bits(expected_xi)
+
+
+# --------------------------- the native controller FMU runs these functions (issue 16)
+NATIVE_SHAPES = [(1, 5, 1), (2, 2, 3), (2, 4, 1), (3, 3, 2), (4, 2, 3), (4, 3, 1)]  # (order, sets, variant)
+
+
+@pytest.fixture(scope="module")
+def native_controller():
+    return build_native.ensure_built()["AdaptiveFuzzyController"][2]
+
+
+@pytest.mark.parametrize("order,sets,variant", NATIVE_SHAPES)
+def test_the_native_controller_fmu_is_the_python_one_at_any_order(fmu_paths, native_controller, order, sets,
+                                                                  variant):
+    """Both editions of the controller FMU, driven alike for 80 steps with the inputs latched
+    from the inputs (host-robust latch, a re-latch at the first doStep): u, E.., alpha..,
+    every theta_j and w_hat, bit for bit."""
+    from tests.fmu_helpers import Driven
+
+    inputs = ("e", "de", "d2e", "d3e")[:order]
+    references = ("ym", "dym", "d2ym", "d3ym")[:order]
+    outputs = ["u", "w_hat", *("E", "dE", "d2E", "d3E")[:order], *(f"alpha{i + 1}" for i in range(order)),
+               *(f"theta{j + 1}" for j in range(sets ** order))]
+    h = 1e-3
+    traces = []
+    for path in (fmu_paths["AdaptiveFuzzyController"], native_controller):
+        c = Driven(path, f"shape_{order}_{sets}")
+        try:
+            c.initialize(order=order, sets=sets, variant=variant, fls_input=2 if variant == 2 else 1, k1=4.0, k2=6.0,
+                         k3=4.0, k4=1.0, q1=7.0, q2=4.0, gamma=900.0, m_theta=0.5, theta0=0.7,
+                         **dict.fromkeys(inputs, 0.0))  # placeholders at initialisation: re-latched
+            trace = []
+            for n in range(80):
+                t = n * h
+                c.set(**{name: 0.3 * math.cos(1.7 * t + i) for i, name in enumerate(inputs)},
+                      **{name: 0.5 * math.sin(t + i) for i, name in enumerate(references)})
+                trace.append(bits(c.get(*outputs)))
+                c.slave.doStep(t, h)
+            trace.append(bits(c.get(*outputs)))
+            traces.append(trace)
+        finally:
+            c.free()
+    assert traces[0] == traces[1]
+    assert traces[0][-1] != traces[0][1]  # theta learned
