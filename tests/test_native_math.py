@@ -513,7 +513,7 @@ def test_the_native_controller_fmu_is_the_python_one_at_any_order(fmu_paths, nat
         c = Driven(path, f"shape_{order}_{sets}")
         try:
             c.initialize(order=order, sets=sets, variant=variant, fls_input=2 if variant == 2 else 1, k1=4.0, k2=6.0,
-                         k3=4.0, k4=1.0, q1=7.0, q2=4.0, gamma=900.0, m_theta=0.5, theta0=0.7,
+                         k3=4.0, k4=1.0, q1=7.0, q2=4.0, gamma=900.0, m_theta=0.75, theta0=0.7,
                          **dict.fromkeys(inputs, 0.0))  # placeholders at initialisation: re-latched
             trace = []
             for n in range(80):
