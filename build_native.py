@@ -204,6 +204,8 @@ def fmi2_description(model_identifier: str, guid: str) -> ET.Element:
     cosim.set("needsExecutionTool", "false")
     cosim.set("canNotUseMemoryManagementFunctions", "true")
     cosim.set("canBeInstantiatedOnlyOncePerProcess", "false")
+    cosim.set("canGetAndSetFMUstate", "true")  # fmi_layer.c: get/set/free and (de)serialize the state
+    cosim.set("canSerializeFMUstate", "true")
     return root
 
 
@@ -326,6 +328,9 @@ def _atomic_write(path: Path, data: bytes) -> None:
     try:
         with os.fdopen(handle, "wb") as stream:
             stream.write(data)
+        import build_fmu
+
+        build_fmu.ordinary_file_mode(temporary)
         os.replace(temporary, path)
     except BaseException:
         if os.path.exists(temporary):
