@@ -190,6 +190,17 @@ def _normalized_start(rows):
 
 
 @pytest.mark.parametrize("model", MODELS)
+def test_native_binaries_carry_no_build_path(native, model):
+    for version in (2, 3):
+        with zipfile.ZipFile(native[model][version]) as archive:
+            for name in archive.namelist():
+                if name.startswith("binaries/"):
+                    data = archive.read(name)
+                    for path in (str(build_native.ROOT), "build/native/obj", "/tmp/"):
+                        assert path.encode() not in data, (name, path)
+
+
+@pytest.mark.parametrize("model", MODELS)
 def test_native_fmus_are_ordinary_files(native, model):
     umask = os.umask(0)
     os.umask(umask)
