@@ -82,14 +82,19 @@ def build_script(script: Path, fmu_path: Path, project_files) -> Path:
     os.close(handle)
     try:
         _run_builder(script, Path(partial), project_files, fmu_path.name)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(partial, 0o666 & ~umask)  # as an ordinary new file (mkstemp makes it private)
+        ordinary_file_mode(partial)
         os.replace(partial, fmu_path)
     finally:
         if os.path.exists(partial):
             os.remove(partial)
     return fmu_path
+
+
+def ordinary_file_mode(path) -> None:
+    """Give a file made by mkstemp (private, 0600) the mode of an ordinary new file (0666 less the umask)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
 
 
 def _run_builder(script: Path, fmu_path: Path, project_files, label: str):

@@ -204,6 +204,8 @@ def fmi2_description(model_identifier: str, guid: str) -> ET.Element:
     cosim.set("needsExecutionTool", "false")
     cosim.set("canNotUseMemoryManagementFunctions", "true")
     cosim.set("canBeInstantiatedOnlyOncePerProcess", "false")
+    cosim.set("canGetAndSetFMUstate", "true")  # fmi_layer.c: get/set/free and (de)serialize the state
+    cosim.set("canSerializeFMUstate", "true")
     return root
 
 
@@ -326,6 +328,9 @@ def _atomic_write(path: Path, data: bytes) -> None:
     try:
         with os.fdopen(handle, "wb") as stream:
             stream.write(data)
+        import build_fmu
+
+        build_fmu.ordinary_file_mode(temporary)
         os.replace(temporary, path)
     except BaseException:
         if os.path.exists(temporary):
@@ -336,9 +341,12 @@ def _atomic_write(path: Path, data: bytes) -> None:
 def _compile(model: NativeModel, header_dir: Path, fmi_version: int, target: Target, zig_version: str) -> Path:
     """One shared library, cached by the hash of everything that goes into it."""
     includes = (header_dir, fmi_headers(), LAYER[0].parent, *{p.parent for p in model.sources})
-    arguments = ["cc", "-target", target.zig, "-shared", *CFLAGS, f"-DFMI_VERSION={fmi_version}"]
+    arguments = ["cc", "-target", target.zig, "-shared", *CFLAGS, f"-DFMI_VERSION={fmi_version}",
+                 "-g0", "-s"]  # no debug information, no symbol table beyond the exports: no build paths inside
     if target.extension == ".so":
         arguments += ["-fPIC", "-lm"]
+    if target.extension == ".dylib":  # the name a host sees, not the scratch file's path
+        arguments.append(f"-Wl,-install_name,@rpath/{model.model_identifier}.dylib")
     arguments += [f"-I{folder}" for folder in includes]
     digest = hashlib.sha256("\0".join([zig_version, *arguments[:-len(includes)]]).encode())
     for path in (*LAYER, *model.sources, *model.headers, header_dir / "model_variables.h",

@@ -36,13 +36,14 @@ int chatter_update(ChatterMonitor *state, double u, double step_size) {
 }
 
 void chatter_warning(const ChatterMonitor *state, double step_size, char *message, size_t size) {
+    /* chatter_monitor.warning's text, word for word */
     snprintf(message, size,
-             "u chatters with communication step %g s: over the last ~%g s it varies like a %.3g Hz sine "
-             "(total variation %.4g/s, mean |u| %.4g; converged loops stay below %g Hz), so the results are not "
-             "the controller's. Use a smaller step (largest validated for a host that delays every link, Jacobi: "
-             "%g s for the paper's pendulum scenarios, %g s for the manipulator), or a master that respects "
-             "direct feedthrough (u depends directly on e, de, ym, dym: set them, then read u, at the same "
-             "communication point)",
+             "u chatters with communication step %g s: over the last ~%g s it varies like a %.4g Hz sine "
+             "(total variation %.4g/s, mean |u| %.4g): over the %g Hz threshold (converged loops stay below "
+             "%g Hz), so the results are not the controller's. Use a smaller step (largest validated for a host "
+             "that delays every link, Jacobi: %g s for the paper's pendulum scenarios, %g s for the manipulator), "
+             "or a master that respects direct feedthrough (u depends directly on e, de, ym, dym: set them, then "
+             "read u, at the same communication point)",
              step_size, CHATTER_AVERAGING_TIME, chatter_frequency(state), state->variation_rate, state->magnitude,
-             CHATTER_THRESHOLD_HZ, 6.4e-5, 3.2e-5);  /* chatter_monitor.py's JACOBI_VALIDATED_STEP */
+             CHATTER_THRESHOLD_HZ, CHATTER_CONVERGED_HZ, 6.4e-5, 3.2e-5);  /* chatter_monitor.py's JACOBI_VALIDATED_STEP */
 }

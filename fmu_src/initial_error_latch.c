@@ -39,6 +39,19 @@ static void relatch(InitialErrorLatch *state, double time, const double current[
     memcpy(state->latched, current, sizeof(double) * (size_t)n);
 }
 
+/* _start_agrees: is the first latch rejected (the start inputs) consistent with the current sample? */
+static int start_agrees(const InitialErrorLatch *state, double time, const double current[]) {
+    return time > state->rejected_time &&
+           latch_consistent((int)state->order, state->rejected, current, time - state->rejected_time);
+}
+
+/* _restore_start: the start inputs were right, the samples in between were placeholders */
+static void restore_start(InitialErrorLatch *state) {
+    memcpy(state->latched, state->rejected, sizeof(double) * (size_t)state->order);
+    state->origin = state->rejected_time;
+    state->relatches = 0.0;
+}
+
 int latch_observe(InitialErrorLatch *state, double time, const double sample[]) {
     if (state->open <= 0.0) return 0;
     int n = (int)state->order;
@@ -51,6 +64,12 @@ int latch_observe(InitialErrorLatch *state, double time, const double sample[]) 
     double h = time - state->previous_time;
     int events = 0;
     if (differ) {
+        if (h > 0.0 && n > 1 && state->relatches != 0.0 && start_agrees(state, time, current)) {
+            restore_start(state); /* fmpy's SSP simulator: 0 for two steps after consistent start values */
+            state->open = 0.0;
+            state->confirmed = 1.0;
+            return LATCH_RELATCHED | LATCH_DECIDED;
+        }
         if (h <= 0.0 || !latch_consistent(n, state->previous, current, h)) {
             relatch(state, time, current);
             events = LATCH_RELATCHED;

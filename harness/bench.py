@@ -28,6 +28,7 @@ import time as clock
 from pathlib import Path
 
 from . import scenario as scenarios
+from .cases import default_jobs
 from .fmi import Component, ModelInfo
 from .master import Master, resolve_fmu
 from .oracle import simulate_oracle
@@ -311,8 +312,37 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
     return figures
 
 
+TABLES_TARGET_S = {"native": 10.0}  # issue 16: `tables --edition native` on 2 cores
+
+
+def tables_wall_seconds(edition: str, stop: float | None = None) -> float:
+    """Wall time of ``python -m harness tables --edition EDITION`` (a process of its own, output
+    to a temporary folder), as a user runs it: the main job's figure, in the benchmark."""
+    import subprocess
+    import sys
+
+    with tempfile.TemporaryDirectory(prefix="afc_bench_tables_") as folder:
+        command = [sys.executable, "-m", "harness", "tables", "--edition", edition, "--out", folder]
+        if stop is not None:
+            command += ["--stop", repr(stop)]
+        started = clock.perf_counter()
+        completed = subprocess.run(command, capture_output=True, text=True)
+        seconds = clock.perf_counter() - started
+    if completed.returncode != 0:
+        last = (completed.stderr.strip().splitlines() or ["no message"])[-1]
+        raise RuntimeError(f"tables --edition {edition} failed: {last}")
+    return seconds
+
+
 def bench_command(args) -> int:
     figures = bench(args.scenario, args.controller, args.stop, args.step, args.repeat)
+    if args.tables:
+        for edition in ("native", "python"):
+            try:
+                figures[f"tables_{edition}_s"] = tables_wall_seconds(edition)
+            except Exception as error:  # noqa: BLE001 - reported beside the figures, as the engines are
+                figures[f"tables_{edition}_s"] = None
+                figures["notes"][f"tables_{edition}"] = f"{type(error).__name__}: {error}"
     if args.json:
         print(json.dumps(figures))
         return 0
@@ -360,6 +390,15 @@ def bench_command(args) -> int:
         own, null = figures.get(f"fmu_{name}_us"), figures.get(f"fmu_{name}_null_us")
         if own is not None and null is not None:
             print(f"  {name:40s} {own:9.2f} {null:9.2f} {own - null:10.2f}")
+    if args.tables:
+        native_s, python_s = figures.get("tables_native_s"), figures.get("tables_python_s")
+        text = {key: "failed" if value is None else f"{value:.1f} s" for key, value in
+                (("native", native_s), ("python", python_s))}
+        print(f"  target: `tables --edition native` (the Table I/II report, {default_jobs()} processes) <= "
+              f"{TABLES_TARGET_S['native']:g} s wall: {text['native']}; pythonfmu edition: {text['python']} "
+              f"{figures['notes'].get('tables_native', '')}{figures['notes'].get('tables_python', '')}")
+    else:
+        print("  (`--tables` also times `tables` in both editions: the main job)")
     fmpy_whole = figures.get("fmpy_ssp_whole_us")
     if fmpy_whole:
         print(f"  target: ours at least 2x faster than fmpy's SSP simulator (whole runs): "
@@ -377,5 +416,8 @@ def register(commands):
     parser.add_argument("--step", type=cli_args.positive_float, help="communication step (default: the scenario's)")
     parser.add_argument("--repeat", type=cli_args.positive_int, default=3, help="measurements per figure; the best counts")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--tables", action="store_true",
+                        help="also time `tables` (the Table I/II report, full horizon) in both editions: "
+                             "about 5 s native, 50 s pythonfmu")
     parser.set_defaults(handler=bench_command)
 

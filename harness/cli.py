@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 from . import cli_args
@@ -97,17 +98,24 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True)
     for register in _subcommand_registrations():
         register(commands)
-    for command in commands.choices.values():
-        add_edition_argument(command)
+    for name, command in commands.choices.items():
+        add_edition_argument(command, fmi3=name not in SSP_ENGINE_COMMANDS)
     return parser
 
 
-def add_edition_argument(parser: argparse.ArgumentParser) -> None:
-    """``--edition``: which FMUs the command runs (one option, shared by every command)."""
-    parser.add_argument("--edition", choices=("python", "native", "native3"), default=None,
-                        help="python: the pythonfmu FMUs (reference edition); native: the C FMUs, FMI 2.0; "
-                             "native3: the C FMUs, FMI 3.0 (our master only; docs/native.md); "
-                             "default: $AFC_EDITION, else python")
+# commands that hand the FMUs to SSP engines (Ecos, fmpy.ssp, libcosim), which load FMI 2.0 only
+SSP_ENGINE_COMMANDS = ("export-ssp", "compare-engines", "hosts")
+
+
+def add_edition_argument(parser: argparse.ArgumentParser, fmi3: bool = True) -> None:
+    """``--edition``: which FMUs the command runs (one option, shared by every command);
+    ``fmi3=False`` leaves out native3 (the SSP engines take FMI 2.0 FMUs)."""
+    parser.add_argument("--edition", choices=("python", "native", "native3") if fmi3 else ("python", "native"),
+                        default=None,
+                        help="python: the pythonfmu FMUs (reference edition); native: the C FMUs, FMI 2.0"
+                             + ("; native3: the C FMUs, FMI 3.0 (our master only; docs/native.md)" if fmi3 else
+                                " (the SSP engines take FMI 2.0 FMUs: no native3 here)")
+                             + "; default: $AFC_EDITION, else python")
 
 
 def apply_edition(args):
@@ -138,6 +146,12 @@ def main(argv=None) -> int:
         return done.code if isinstance(done.code, int) else cli_args.USAGE_EXIT
     undo = apply_edition(args)
     try:
+        import build_fmu
+
+        if args.command in SSP_ENGINE_COMMANDS and os.environ.get(build_fmu.EDITION_VARIABLE) == "native3":
+            print(f"error: {build_fmu.EDITION_VARIABLE}=native3: {args.command} hands the FMUs to SSP engines, "
+                  "which take FMI 2.0 FMUs; use --edition native", file=sys.stderr)
+            return cli_args.USAGE_EXIT
         return args.handler(args)
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)

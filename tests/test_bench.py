@@ -39,3 +39,27 @@ def test_bench_json_reports_every_figure_and_times_the_right_runs(fmu_paths, cap
             assert key in figures["notes"] and figures["notes"][key], key
         else:
             assert math.isfinite(value) and value > 0, key
+
+
+def test_bench_times_the_main_job_in_both_editions_when_asked(monkeypatch, capsys):
+    from harness import bench
+
+    monkeypatch.setattr(bench, "bench", lambda *args: {**FAKE_FIGURES, "notes": {}})
+    timed = []
+    monkeypatch.setattr(bench, "tables_wall_seconds", lambda edition: timed.append(edition) or {"native": 5.4}[edition])
+    assert cli_main(["bench", "--tables"]) == 0
+    output = capsys.readouterr().out
+    assert timed == ["native", "python"]
+    assert "target: `tables --edition native` (the Table I/II report, " in output
+    assert "<= 10 s wall: 5.4 s; pythonfmu edition: failed KeyError: 'python'" in output
+
+
+def test_the_main_job_is_timed_as_a_user_runs_it(fmu_paths):
+    from harness import bench
+
+    assert bench.tables_wall_seconds("python", stop=0.05) > 0
+
+
+FAKE_FIGURES = {"scenario": "pendulum_case1", "controller": "vud", "step": 5e-4, "stop": 0.1, "steps": 200,
+                "repeat": 1, "master_loop": "python", "ours_feedthrough_us": 10.0, "ours_feedthrough_whole_us": 12.0,
+                "real_time_factor": 50.0, "oracle_max_abs_difference": 0.0, "target_floor_plus_oracle_x1_5_us": 20.0}

@@ -214,6 +214,18 @@ def test_mistakes_a_command_finds_are_one_line_with_the_right_status(case_id, ar
     assert "unknown error" not in line  # pythonfmu's tail of every failure, stripped
 
 
+@pytest.mark.parametrize("command", cli.SSP_ENGINE_COMMANDS)
+def test_fmi3_fmus_are_refused_where_ssp_engines_take_them(command, monkeypatch, capsys):
+    argv = [command, "pendulum_case1"] if command != "hosts" else [command]
+    assert cli.main([*argv, "--edition", "native3"]) == 2
+    assert "invalid choice: 'native3' (choose from 'python', 'native')" in _one_error_line(capsys.readouterr().err)
+    monkeypatch.setenv("AFC_EDITION", "native3")
+    assert cli.main(argv) == 2
+    assert _one_error_line(capsys.readouterr().err) == (
+        f"error: AFC_EDITION=native3: {command} hands the FMUs to SSP engines, which take FMI 2.0 FMUs; "
+        "use --edition native")
+
+
 def test_the_last_resort_handler_turns_any_exception_into_one_line(monkeypatch, capsys):
     def broken(args):
         raise KeyError("something internal\nwith a second line")

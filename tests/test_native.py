@@ -5,6 +5,7 @@ The native FMUs are built once per session for the platforms in $AFC_NATIVE_PLAT
 (pip install ziglang, the ``native`` extra) is not installed.
 """
 import math
+import os
 import re
 import struct
 import zipfile
@@ -152,6 +153,12 @@ def test_the_linux_binaries_need_only_libc_and_libm_of_glibc_2_17(native, platfo
 
 
 # ------------------------------------------------------------- descriptions
+# what a host reads of <CoSimulation> before it calls anything (needsExecutionTool differs on
+# purpose: the pythonfmu edition needs a Python, the native one nothing)
+CAPABILITIES = ("canGetAndSetFMUstate", "canSerializeFMUstate", "canHandleVariableCommunicationStepSize",
+                "canInterpolateInputs", "canBeInstantiatedOnlyOncePerProcess")
+
+
 def _variables(path: Path) -> dict:
     md = read_model_description(str(path))
     kinds = {"Real": "Real", "Float64": "Real", "Integer": "Integer", "Int32": "Integer"}
@@ -165,8 +172,10 @@ def _variables(path: Path) -> dict:
     dependencies = {u.variable.name: sorted(d.name for d in (u.dependencies or [])) for u in md.outputs}
     experiment = md.defaultExperiment
     default = None if experiment is None else (experiment.startTime, experiment.stopTime, experiment.stepSize)
+    capabilities = {name: getattr(md.coSimulation, name) for name in CAPABILITIES}
     return dict(variables=rows, dependencies=dependencies, default_experiment=default,
-                model_identifier=md.coSimulation.modelIdentifier, description=md.description)
+                model_identifier=md.coSimulation.modelIdentifier, description=md.description,
+                capabilities=capabilities)
 
 
 def _normalized_start(rows):
@@ -181,6 +190,25 @@ def _normalized_start(rows):
 
 
 @pytest.mark.parametrize("model", MODELS)
+def test_native_binaries_carry_no_build_path(native, model):
+    for version in (2, 3):
+        with zipfile.ZipFile(native[model][version]) as archive:
+            for name in archive.namelist():
+                if name.startswith("binaries/"):
+                    data = archive.read(name)
+                    for path in (str(build_native.ROOT), "build/native/obj", "/tmp/"):
+                        assert path.encode() not in data, (name, path)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_native_fmus_are_ordinary_files(native, model):
+    umask = os.umask(0)
+    os.umask(umask)
+    for version in (2, 3):
+        assert native[model][version].stat().st_mode & 0o777 == 0o666 & ~umask, f"FMI {version}"
+
+
+@pytest.mark.parametrize("model", MODELS)
 def test_the_editions_declare_the_same_variables(native, fmu_paths, model):
     python = _variables(fmu_paths[model])
     for version in (2, 3):
@@ -192,6 +220,7 @@ def test_the_editions_declare_the_same_variables(native, fmu_paths, model):
         assert described["default_experiment"] == python["default_experiment"], f"FMI {version}"
         assert described["model_identifier"] == model
         assert described["description"] == python["description"]
+        assert described["capabilities"] == python["capabilities"], f"FMI {version}"
 
 
 def test_the_native_descriptions_follow_the_declaration_table(native, monkeypatch):
@@ -318,6 +347,41 @@ def _drive_controller(driven: Driven, steps=300, h=1e-3, state_at=None, **parame
             saved = driven.slave.getFMUstate()
         driven.slave.doStep(t, h)
     return trace, saved
+
+
+def _chattering_host(driven: Driven):
+    """A host whose error input alternates in sign every 10 ms step: u chatters (warned after 1 s)."""
+    driven.initialize(e=0.1, de=0.0, ym=0.0, dym=0.0)
+    for i in range(150):
+        driven.set(e=0.1 if i % 2 else -0.1)
+        driven.slave.doStep(i * 0.01, 0.01)
+
+
+def _unpropagated_host(driven: Driven):
+    """A host that does not propagate initial values: the inputs stay 0 through initialisation, then
+    jump to the loop's true values at the first doStep (the controller re-latches e(0), de(0))."""
+    driven.initialize(e=0.0, de=0.0, ym=0.0, dym=0.0)
+    h = 1e-4
+    for i in range(20):
+        t = i * h
+        ym, dym = 0.5 * math.sin(t), 0.5 * math.cos(t)
+        driven.set(e=ym - 0.26 * math.cos(2 * t), de=dym + 0.52 * math.sin(2 * t), ym=ym, dym=dym)
+        driven.slave.doStep(t, h)
+
+
+@pytest.mark.parametrize("host", [_chattering_host, _unpropagated_host])
+def test_the_editions_warn_in_the_same_words(native, fmu_paths, host):
+    warnings = {}
+    for edition, path in (("python", fmu_paths["AdaptiveFuzzyController"]),
+                          ("native", native["AdaptiveFuzzyController"][2])):
+        driven = Driven(path)
+        try:
+            host(driven)
+        finally:
+            driven.free()
+        warnings[edition] = [text for status, text in driven.messages if status == 1]
+    assert len(warnings["python"]) == 1, warnings
+    assert warnings["native"] == warnings["python"]
 
 
 @pytest.mark.parametrize("variant", [1, 2, 3])

@@ -130,3 +130,13 @@ def test_cli_exit_codes_and_hint(monkeypatch, tmp_path, capsys):
     captured = capsys.readouterr()
     assert "regress --update" in captured.err and "FAIL" in captured.out
     assert cli_main(["regress", "pendulum_case9"]) == 2
+
+
+@pytest.mark.parametrize("edition", ["native", "native3"])
+def test_the_references_hold_for_the_native_edition(edition, tmp_path, capsys):
+    import build_native
+
+    if not build_native.compiler_available():
+        pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
+    assert cli_main(["regress", "--edition", edition, "--report", str(tmp_path)]) == 0
+    assert "15/15 cases pass" in capsys.readouterr().out
