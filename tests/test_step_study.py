@@ -194,5 +194,5 @@ def test_the_chatter_warning_names_the_jacobi_steps_of_the_study(committed):
         assert chatter_monitor.JACOBI_VALIDATED_STEP[family] == min(
             step_study.jacobi_safe_step(committed, name) for name in names), family
     c_source = (ROOT / "fmu_src" / "chatter_monitor.c").read_text()  # the C twin prints the same steps
-    in_c = re.search(r"CHATTER_THRESHOLD_HZ, ([0-9.e+-]+), ([0-9.e+-]+)\);", c_source)
+    in_c = re.search(r"CHATTER_CONVERGED_HZ, ([0-9.e+-]+), ([0-9.e+-]+)\);", c_source)
     assert [float(v) for v in in_c.groups()] == list(chatter_monitor.JACOBI_VALIDATED_STEP.values())
