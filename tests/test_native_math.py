@@ -283,20 +283,21 @@ def bits(values):
     return [struct.pack("<d", value) for value in values]
 
 
-def c_matrix(rows):
-    matrix = Matrix()
+def _c_table(kind, rows):
+    """A 2-D ctypes array of ``kind`` filled from nested sequences (the rest stays 0)."""
+    table = kind()
     for i, row in enumerate(rows):
         for j, value in enumerate(row):
-            matrix[i][j] = value
-    return matrix
+            table[i][j] = value
+    return table
+
+
+def c_matrix(rows):
+    return _c_table(Matrix, rows)
 
 
 def c_boundary_table(boundaries):
-    table = Boundaries()
-    for i, row in enumerate(boundaries):
-        for l, value in enumerate(row):
-            table[i][l] = value
-    return table
+    return _c_table(Boundaries, boundaries)
 
 
 SHAPES = [(n, m) for n in (1, 2, 3, 4) for m in (2, 3, 4, 5) if m ** n <= afc_math.RULES_MAX]
