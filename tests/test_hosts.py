@@ -96,3 +96,19 @@ def test_unknown_host_is_a_one_line_error(capsys):
 
     assert main(["hosts", "--host", "nosuchhost"]) == 2
     assert "unknown host 'nosuchhost'" in capsys.readouterr().err
+
+
+def test_the_native_edition_gives_every_host_the_same_rows_and_warnings(monkeypatch, fmu_paths):
+    """Every host, python vs native FMUs: the same scores to the last bit and the same warning texts."""
+    import build_native
+
+    if not build_native.compiler_available():
+        pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
+    rows = {}
+    for edition in ("python", "native"):
+        monkeypatch.setenv("AFC_EDITION", edition)
+        matrix = hosts.hosts_matrix([SCENARIO], ("vud",), None, ("validated",), stop=0.3, jobs=2)
+        rows[edition] = [{k: v for k, v in row.items() if k != "wall_s"} for row in matrix["rows"]]
+    assert len(rows["native"]) == len(hosts.HOSTS) - len(matrix["skipped"])
+    assert any(row["warnings"] for row in rows["native"])  # the re-latch warnings of the hosts without propagation
+    assert rows["native"] == rows["python"]
