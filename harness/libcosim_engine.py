@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time as clock
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 NS_OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
@@ -28,6 +28,7 @@ class LibcosimRun:
     loop_us_per_step: float  # libcosim's stepping alone
     last_values: dict  # "instance.variable" -> value at the stop time
     recorded_samples: int = 0  # samples of each ``record`` variable the time-series observer holds
+    recorded_last_values: dict = field(default_factory=dict)  # its last sample of each
 
 
 def with_algorithm(ssp_path, out_dir, step: float, workers: int = 0) -> Path:
@@ -85,12 +86,14 @@ def run_libcosim(package_dir, stop: float, step: float, variables=(), record=())
     elapsed = clock.perf_counter() - started
     last = {dotted: observer.last_real_values(slave, [reference])[0]
             for dotted, (slave, reference) in indices.items()}
-    recorded = 0
-    if record:  # the observer did record: a sample of each variable at each step
-        recorded = min(len(series.time_series_real_samples(slave, reference, 1, steps + 1)[0])
-                       for slave, reference in observed)
+    recorded, recorded_last = 0, {}
+    if record:  # what the observer holds: a sample of each variable at each step
+        series_of = {dotted: series.time_series_real_samples(slave, reference, 1, steps + 1)[2]
+                     for dotted, (slave, reference) in zip(record, observed)}  # [2]: (times, steps, values)
+        recorded = min(len(values) for values in series_of.values())
+        recorded_last = {dotted: values[-1] for dotted, values in series_of.items() if values}
     return LibcosimRun(steps=steps, loop_us_per_step=1e6 * elapsed / steps, last_values=last,
-                       recorded_samples=recorded)
+                       recorded_samples=recorded, recorded_last_values=recorded_last)
 
 
 def _reference(execution, dotted: str) -> tuple[int, int]:

@@ -390,21 +390,25 @@ class Master:
                  for a in plan if a.copies is None and a.recorded]
         steppers = [(component, component.stepper()) for component in self.components.values()]
         bound = self.column_bounds
-        for n in range(steps):
-            t = start + n * step
-            self._propagate(plan, t)
-            row = record[n]
-            for first, last, view in reads:
-                row[first:last] = view
-            self.rows_done = rows_done = n + 1
-            if rows_done % DIVERGENCE_CHECK_EVERY == 0:
-                self._check_bound(record, rows_done - DIVERGENCE_CHECK_EVERY, rows_done, bound)
-            for component, do_step in steppers:
-                status = do_step(t, step, 1)
-                if status > FMI_WARNING:
-                    component.fail("fmi2DoStep", status, t)
-            if progress is not None and rows_done % every == 0:
-                progress(rows_done, steps)
+        rows_done = 0
+        try:
+            for n in range(steps):
+                t = start + n * step
+                self._propagate(plan, t)
+                row = record[n]
+                for first, last, view in reads:
+                    row[first:last] = view
+                rows_done = n + 1
+                if rows_done % DIVERGENCE_CHECK_EVERY == 0:
+                    self._check_bound(record, rows_done - DIVERGENCE_CHECK_EVERY, rows_done, bound)
+                for component, do_step in steppers:
+                    status = do_step(t, step, 1)
+                    if status > FMI_WARNING:
+                        component.fail("fmi2DoStep", status, t)
+                if progress is not None and rows_done % every == 0:
+                    progress(rows_done, steps)
+        finally:
+            self.rows_done = rows_done  # for the partial result, if something stopped the loop
 
     def _loop_compiled(self, function, plan: list, record, progress, every: int):
         """The same rows by harness/master_loop.c, in blocks of ``every`` rows (the progress

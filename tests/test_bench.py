@@ -5,6 +5,8 @@ with another (floor < ours holds on a quiet machine, not on a loaded one: not a 
 import json
 import math
 
+import pytest
+
 from harness.cli import main as cli_main
 
 STOP, STEP = 0.2, 5e-4  # pendulum_case1's step (docs/convergence.md)
@@ -58,6 +60,8 @@ def test_the_main_job_is_timed_as_a_user_runs_it(fmu_paths):
     from harness import bench
 
     assert bench.tables_wall_seconds("python", stop=0.05) > 0
+    with pytest.raises(RuntimeError, match=r"tables --edition native failed: .*--stop"):
+        bench.tables_wall_seconds("native", stop=-1.0)  # the command really runs, and its failure is said
 
 
 FAKE_FIGURES = {"scenario": "pendulum_case1", "controller": "vud", "step": 5e-4, "stop": 0.1, "steps": 200,

@@ -549,8 +549,11 @@ def test_libcosim_runs_the_native_fmus_from_the_exported_ssp_as_the_python_ones(
     for edition, paths in (("python", fmu_paths), ("native", {n: p[2] for n, p in native.items()})):
         package = ssp.export_ssp(configured, tmp_path / f"{edition}.ssp", fmu_paths=paths)
         folder = with_algorithm(package, tmp_path / edition, configured.step, workers=0)
-        runs[edition] = run_libcosim(folder, configured.stop, configured.step, signals)
+        runs[edition] = run_libcosim(folder, configured.stop, configured.step, signals, record=signals)
     assert runs["native"].steps == configured.steps
+    # the time-series observer (the benchmark's libcosim rows) records every step's values
+    assert runs["native"].recorded_samples == configured.steps
+    assert runs["native"].recorded_last_values == runs["native"].last_values
     assert runs["native"].last_values == runs["python"].last_values
     assert runs["native"].last_values["controller.theta1"] != 0.0
 
