@@ -11,49 +11,17 @@ newer than the FMU.
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import re
 import subprocess
 import sys
-from dataclasses import dataclass
+import tempfile
 from pathlib import Path
 
+import build_native
+from fmu_catalog import FMUS, FmuSource, model_class, ordinary_file_mode, selected_edition
+
 ROOT = Path(__file__).resolve().parent
-FMU_DIR = ROOT / "build" / "fmus"
-BASE = ROOT / "fmu_src" / "afc_slave_base.py"
-
-
-@dataclass(frozen=True)
-class FmuSource:
-    model_identifier: str
-    script: Path
-    project_files: tuple[Path, ...]
-
-    @property
-    def fmu_path(self) -> Path:
-        return FMU_DIR / f"{self.model_identifier}.fmu"
-
-    @property
-    def sources(self) -> tuple[Path, ...]:
-        return (self.script, *self.project_files)
-
-
-FMUS = (
-    FmuSource("AdaptiveFuzzyController", ROOT / "fmu_src" / "adaptive_fuzzy_controller_fmu.py",
-              (BASE, ROOT / "fmu_src" / "afc_math.py",
-               ROOT / "fmu_src" / "initial_error_latch.py", ROOT / "fmu_src" / "chatter_monitor.py")),
-    FmuSource("InvertedPendulum", ROOT / "plants" / "inverted_pendulum_fmu.py",
-              (BASE, ROOT / "plants" / "inverted_pendulum_model.py",
-               ROOT / "plants" / "plant_integration.py", ROOT / "plants" / "rk4_plant_slave.py")),
-    FmuSource("Manipulator", ROOT / "plants" / "manipulator_fmu.py",
-              (BASE, ROOT / "plants" / "manipulator_model.py",
-               ROOT / "plants" / "plant_integration.py", ROOT / "plants" / "rk4_plant_slave.py")),
-    FmuSource("TrackingReference", ROOT / "plants" / "tracking_reference_fmu.py", (BASE,)),
-    FmuSource("DcMotorArm", ROOT / "plants" / "dc_motor_arm_fmu.py",
-              (BASE, ROOT / "plants" / "dc_motor_arm_model.py",
-               ROOT / "plants" / "plant_integration.py", ROOT / "plants" / "rk4_plant_slave.py")),
-)
 
 
 def is_stale(fmu: FmuSource) -> bool:
@@ -75,8 +43,6 @@ def build_script(script: Path, fmu_path: Path, project_files) -> Path:
     ``fmu_path`` in one step (``os.replace``): a reader never sees a half-written
     FMU, and two builds at once each replace the file whole.
     """
-    import tempfile
-
     fmu_path.parent.mkdir(parents=True, exist_ok=True)
     handle, partial = tempfile.mkstemp(dir=fmu_path.parent, prefix=f".{fmu_path.stem}.", suffix=".fmu")
     os.close(handle)
@@ -88,13 +54,6 @@ def build_script(script: Path, fmu_path: Path, project_files) -> Path:
         if os.path.exists(partial):
             os.remove(partial)
     return fmu_path
-
-
-def ordinary_file_mode(path) -> None:
-    """Give a file made by mkstemp (private, 0600) the mode of an ordinary new file (0666 less the umask)."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(path, 0o666 & ~umask)
 
 
 def _run_builder(script: Path, fmu_path: Path, project_files, label: str):
@@ -113,16 +72,7 @@ def build(fmu: FmuSource) -> Path:
     return build_script(fmu.script, fmu.fmu_path, fmu.project_files)
 
 
-EDITIONS = ("python", "native", "all")
-#: the edition the harness runs (``--edition`` sets it for the process and its workers)
-EDITION_VARIABLE = "AFC_EDITION"
-
-
-def selected_edition() -> str:
-    edition = os.environ.get(EDITION_VARIABLE, "python") or "python"
-    if edition not in ("python", "native", "native3"):
-        raise SystemExit(f"error: {EDITION_VARIABLE}={edition!r} is invalid; valid: python, native, native3")
-    return edition
+BUILD_EDITIONS = ("python", "native", "all")  # what this script builds (native: FMI 2.0 and 3.0)
 
 
 def ensure_built(force: bool = False, verbose: bool = False, edition: str | None = None) -> dict[str, Path]:
@@ -134,7 +84,6 @@ def ensure_built(force: bool = False, verbose: bool = False, edition: str | None
     """
     edition = edition or selected_edition()
     if edition in ("native", "native3"):
-        import build_native
         version = 3 if edition == "native3" else 2
         return {name: paths[version]
                 for name, paths in build_native.ensure_built(force=force, verbose=verbose).items()}
@@ -148,21 +97,21 @@ def ensure_built(force: bool = False, verbose: bool = False, edition: str | None
     return paths
 
 
-def model_class(model_identifier: str):
-    """The slave class of an FMU, imported as the FMU imports it (top-level modules)."""
-    fmu = next((f for f in FMUS if f.model_identifier == model_identifier), None)
-    if fmu is None:
-        raise KeyError(f"unknown FMU {model_identifier!r}; valid: {[f.model_identifier for f in FMUS]}")
-    for folder in {str(p.parent) for p in fmu.sources}:
-        if folder not in sys.path:
-            sys.path.insert(0, folder)
-    return getattr(importlib.import_module(fmu.script.stem), model_identifier)
+def markdown_table(variables) -> str:
+    """The docs/model.md table of an FMU's variables (its VARIABLES rows)."""
+    lines = ["| name | causality | type | start | valid range | unit | meaning |",
+             "|---|---|---|---|---|---|---|"]
+    for v in variables:
+        valid = v.valid_range() if v.causality == "parameter" else ""
+        if v.causality == "output":
+            valid = "depends on " + (", ".join(v.depends_on) if v.depends_on else "no input")
+        start = f"{v.start:.6g}" if v.causality != "output" else ""
+        lines.append(f"| `{v.name}` | {v.causality} | {v.kind} | {start} | {valid} | {v.unit} | {v.description} |")
+    return "\n".join(lines)
 
 
 def variable_tables() -> str:
     """The variable tables of every FMU in FMUS, generated from each FMU's declaration."""
-    from fmu_src.afc_slave_base import markdown_table
-
     parts = []
     for fmu in FMUS:
         model = model_class(fmu.model_identifier)
@@ -189,13 +138,12 @@ def main(argv=None) -> int:
     parser.add_argument("--force", action="store_true", help="rebuild every FMU")
     parser.add_argument("--docs", "--readme", dest="docs", action="store_true",
                         help="rewrite the variable tables in docs/model.md (--readme: old name)")
-    parser.add_argument("--edition", choices=EDITIONS, default=None,
+    parser.add_argument("--edition", choices=BUILD_EDITIONS, default=None,
                         help="python (pythonfmu), native (C, FMI 2.0 and 3.0, docs/native.md) or all "
                              "(default: all when zig's compiler is installed, else python)")
     args = parser.parse_args(argv)
     editions = ["python", "native"] if args.edition in (None, "all") else [args.edition]
     if "native" in editions:
-        import build_native
         if not build_native.compiler_available():
             if args.edition == "native":
                 print("error: the native edition needs zig's C compiler: pip install -e '.[native]'", file=sys.stderr)

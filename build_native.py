@@ -39,8 +39,8 @@ import argparse
 import hashlib
 import io
 import os
+import re
 import struct
-import subprocess
 import sys
 import tempfile
 import uuid
@@ -51,49 +51,22 @@ from pathlib import Path
 from xml.dom import minidom
 from xml.etree import ElementTree as ET
 
+import fmpy
+
+import c_toolchain
+import fmu_catalog
+from c_toolchain import CFLAGS, WORK_DIR, NativeBuildError, compile_cached, compiler_available
+from fmu_catalog import FMI3_DIR, NATIVE_DIR, FmuSource, model_class
+from plants import registry as plant_registry
+
 ROOT = Path(__file__).resolve().parent
-NATIVE_DIR = ROOT / "build" / "fmus" / "native"
-FMI3_DIR = NATIVE_DIR / "fmi3"
-WORK_DIR = ROOT / "build" / "native"
 LAYER = (ROOT / "fmu_src" / "fmi_layer.c", ROOT / "fmu_src" / "fmi_layer.h")
 GENERATION_TOOL = "afc-fmi native edition (build_native.py)"
 
 
-@dataclass(frozen=True)
-class NativeModel:
-    model_identifier: str
-    sources: tuple[Path, ...]  # C files compiled with the layer
-    headers: tuple[Path, ...] = ()
-
-
-ALL_MODELS = (
-    NativeModel("AdaptiveFuzzyController",
-                (ROOT / "fmu_src" / "adaptive_fuzzy_controller.c", ROOT / "fmu_src" / "afc_math.c",
-                 ROOT / "fmu_src" / "initial_error_latch.c", ROOT / "fmu_src" / "chatter_monitor.c"),
-                (ROOT / "fmu_src" / "afc_math.h", ROOT / "fmu_src" / "initial_error_latch.h",
-                 ROOT / "fmu_src" / "chatter_monitor.h")),
-    NativeModel("InvertedPendulum",
-                (ROOT / "plants" / "inverted_pendulum.c", ROOT / "plants" / "rk4_plant_slave.c",
-                 ROOT / "plants" / "plant_integration.c"),
-                (ROOT / "plants" / "plant_integration.h", ROOT / "plants" / "rk4_plant_slave.h")),
-    NativeModel("Manipulator",
-                (ROOT / "plants" / "manipulator.c", ROOT / "plants" / "rk4_plant_slave.c",
-                 ROOT / "plants" / "plant_integration.c"),
-                (ROOT / "plants" / "plant_integration.h", ROOT / "plants" / "rk4_plant_slave.h")),
-    NativeModel("TrackingReference", (ROOT / "plants" / "tracking_reference.c",)),
-    # the third-order plant of the general-order work (issue 17), when its Python edition exists
-    NativeModel("DcMotorArm",
-                (ROOT / "plants" / "dc_motor_arm.c", ROOT / "plants" / "rk4_plant_slave.c",
-                 ROOT / "plants" / "plant_integration.c"),
-                (ROOT / "plants" / "plant_integration.h", ROOT / "plants" / "rk4_plant_slave.h")),
-)
-
-
-def models() -> tuple[NativeModel, ...]:
-    """The native models whose pythonfmu edition (declaration table) is in build_fmu.FMUS."""
-    import build_fmu
-    declared = {f.model_identifier for f in build_fmu.FMUS}
-    return tuple(m for m in ALL_MODELS if m.model_identifier in declared)
+def models() -> tuple[FmuSource, ...]:
+    """The FMUs of fmu_catalog.py that have a C edition (their ``c_sources``, compiled with the layer)."""
+    return tuple(m for m in fmu_catalog.FMUS if m.c_sources)
 
 
 @dataclass(frozen=True)
@@ -111,46 +84,9 @@ TARGETS = (
     Target("darwin64", "aarch64-macos.11.0", "aarch64-darwin", ".dylib"),
 )
 PLATFORMS = ("linux64", "win64", "darwin64")
-# IEEE arithmetic exactly as written (no fused multiply-add, no fast-math): the native
-# results then match the Python edition's to the last bit where the libm agrees.
-CFLAGS = ("-std=c11", "-O2", "-ffp-contract=off", "-fno-fast-math", "-fvisibility=hidden",
-          "-Wall", "-Wextra", "-Werror", "-Wno-unused-parameter", "-Wno-unused-function", "-Wno-unused-const-variable")
-
-
-class NativeBuildError(RuntimeError):
-    """The native edition cannot be built (no compiler, a compile error)."""
-
-
 # ------------------------------------------------------------------ compiler
-def compiler_available() -> bool:
-    try:
-        import ziglang  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def _zig(*args: str) -> list[str]:
-    return [sys.executable, "-m", "ziglang", *args]
-
-
-def _ziglang_version() -> str:
-    """The installed ziglang package's version (no subprocess), or "" without it."""
-    from importlib import metadata
-
-    try:
-        return metadata.version("ziglang")
-    except metadata.PackageNotFoundError:
-        return ""
-
-
-def _zig_version() -> str:
-    return subprocess.run(_zig("version"), capture_output=True, text=True, check=True).stdout.strip()
-
-
 def fmi_headers() -> Path:
     """fmpy's copy of the FMI 2.0 and 3.0 headers."""
-    import fmpy
     folder = Path(fmpy.__file__).parent / "c-code"
     if not (folder / "fmi3Functions.h").exists():
         raise NativeBuildError(f"the FMI headers are missing from {folder} (fmpy >= 0.3.20 ships them)")
@@ -158,11 +94,6 @@ def fmi_headers() -> Path:
 
 
 # ---------------------------------------------------------- model description
-def model_class(model_identifier: str):
-    import build_fmu
-    return build_fmu.model_class(model_identifier)
-
-
 def _pythonfmu_description(model_identifier: str) -> ET.Element:
     """pythonfmu's modelDescription.xml of the class: the pythonfmu edition's own."""
     cls = model_class(model_identifier)
@@ -172,22 +103,15 @@ def _pythonfmu_description(model_identifier: str) -> ET.Element:
 
 def model_guid(model_identifier: str) -> str:
     """A GUID fixed by the declaration and the C sources (same for FMI 2.0 and 3.0)."""
-    model = _model(model_identifier)
+    model = fmu_catalog.fmu(model_identifier)
     digest = hashlib.sha256()
     root = _pythonfmu_description(model_identifier)
     root.attrib.pop("guid", None)
     root.attrib.pop("generationDateAndTime", None)
     digest.update(ET.tostring(root))
-    for path in (*LAYER, *model.sources, *model.headers):
+    for path in (*LAYER, *model.c_sources, *model.c_headers):
         digest.update(path.read_bytes())
     return "{" + str(uuid.UUID(bytes=digest.digest()[:16], version=5)) + "}"
-
-
-def _model(model_identifier: str) -> NativeModel:
-    for model in ALL_MODELS:
-        if model.model_identifier == model_identifier:
-            return model
-    raise KeyError(f"unknown FMU {model_identifier!r}; valid: {[m.model_identifier for m in models()]}")
 
 
 def _pretty(root: ET.Element) -> bytes:
@@ -276,7 +200,6 @@ def _c_double(value) -> str:
 def numbered_families(variables) -> dict[str, list[int]]:
     """{family: value references of its members 1, 2, ...} for names numbered from 1 without gaps:
     k1, k2 -> "k"; theta1.. -> "theta"; x1_start, x2_start -> "x_start"."""
-    import re
     numbered = {}
     for vr, v in enumerate(variables):
         match = re.fullmatch(r"([A-Za-z_]+?)(\d+)((?:_[A-Za-z]+)?)", v.name)  # k1, theta12, x3_start
@@ -294,10 +217,9 @@ def numbered_families(variables) -> dict[str, list[int]]:
 
 def variables_header(model_identifier: str, guid: str) -> str:
     """model_variables.h: the declaration table for the C layer."""
-    from fmu_src.afc_slave_base import OUTPUT, PARAMETER
     variables = model_class(model_identifier).VARIABLES
-    causality = {PARAMETER: "CAUSALITY_PARAMETER", "input": "CAUSALITY_INPUT", OUTPUT: "CAUSALITY_OUTPUT"}
-    feedthrough = any(v.depends_on for v in variables if v.causality == OUTPUT)
+    causality = {"parameter": "CAUSALITY_PARAMETER", "input": "CAUSALITY_INPUT", "output": "CAUSALITY_OUTPUT"}
+    feedthrough = any(v.depends_on for v in variables if v.causality == "output")
     lines = [f"/* Generated by build_native.py from the VARIABLES table of {model_identifier}: do not edit. */",
              "#ifndef AFC_MODEL_VARIABLES_H", "#define AFC_MODEL_VARIABLES_H", "",
              f"#define MODEL_IDENTIFIER {_c_string(model_identifier)}",
@@ -328,9 +250,7 @@ def _atomic_write(path: Path, data: bytes) -> None:
     try:
         with os.fdopen(handle, "wb") as stream:
             stream.write(data)
-        import build_fmu
-
-        build_fmu.ordinary_file_mode(temporary)
+        fmu_catalog.ordinary_file_mode(temporary)
         os.replace(temporary, path)
     except BaseException:
         if os.path.exists(temporary):
@@ -338,9 +258,9 @@ def _atomic_write(path: Path, data: bytes) -> None:
         raise
 
 
-def _compile(model: NativeModel, header_dir: Path, fmi_version: int, target: Target, zig_version: str) -> Path:
+def _compile(model: FmuSource, header_dir: Path, fmi_version: int, target: Target, zig_version: str) -> Path:
     """One shared library, cached by the hash of everything that goes into it."""
-    includes = (header_dir, fmi_headers(), LAYER[0].parent, *{p.parent for p in model.sources})
+    includes = (header_dir, fmi_headers(), LAYER[0].parent, *{p.parent for p in model.c_sources})
     arguments = ["cc", "-target", target.zig, "-shared", *CFLAGS, f"-DFMI_VERSION={fmi_version}",
                  "-g0", "-s"]  # no debug information, no symbol table beyond the exports: no build paths inside
     if target.extension == ".so":
@@ -349,81 +269,23 @@ def _compile(model: NativeModel, header_dir: Path, fmi_version: int, target: Tar
         arguments.append(f"-Wl,-install_name,@rpath/{model.model_identifier}.dylib")
     arguments += [f"-I{folder}" for folder in includes]
     digest = hashlib.sha256("\0".join([zig_version, *arguments[:-len(includes)]]).encode())
-    for path in (*LAYER, *model.sources, *model.headers, header_dir / "model_variables.h",
+    for path in (*LAYER, *model.c_sources, *model.c_headers, header_dir / "model_variables.h",
                  fmi_headers() / f"fmi{fmi_version}Functions.h"):
         digest.update(path.name.encode())
         digest.update(path.read_bytes())
     cached = WORK_DIR / "obj" / f"{model.model_identifier}-fmi{fmi_version}-{target.zig}-{digest.hexdigest()[:16]}{target.extension}"
     if cached.exists():
         return cached
-    cached.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=cached.parent) as scratch:
-        output = Path(scratch) / f"{model.model_identifier}{target.extension}"
-        environment = dict(os.environ)
-        environment.setdefault("ZIG_GLOBAL_CACHE_DIR", str(WORK_DIR / "zig-cache"))
-        environment.setdefault("ZIG_LOCAL_CACHE_DIR", str(WORK_DIR / "zig-cache"))
-        completed = subprocess.run(_zig(*arguments, "-o", str(output), str(LAYER[0]), *map(str, model.sources)),
-                                   capture_output=True, text=True, env=environment, cwd=scratch)
-        if completed.returncode != 0:
-            raise NativeBuildError(f"compiling {model.model_identifier} (FMI {fmi_version}, {target.zig}) failed:\n"
-                                   f"{completed.stderr}")
-        os.replace(output, cached)
-    return cached
-
-
-def host_target() -> str | None:
-    """zig's target for a library this machine loads: the linux64 FMUs' target on x86-64 Linux
-    (its libc stubs are then already in zig's cache), else zig's own host target."""
-    import platform
-
-    if sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64"):
-        return "x86_64-linux-gnu.2.17"
-    return None
-
-
-def host_library(name: str, sources, headers=()) -> Path:
-    """``sources`` compiled into one shared library for this machine (not an FMU), cached in
-    build/native/obj by the hash of sources, headers and flags; for the tests of the C math
-    and for the master's compiled loop."""
-    sources = tuple(Path(p) for p in sources)
-    target = host_target()
-    extension = {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
-    flags = [f for f in CFLAGS if f != "-fvisibility=hidden"]
-    if target is None:
-        flags.append("-mcpu=baseline")  # not the build machine's CPU: a shared build folder stays usable
-    digest = hashlib.sha256(" ".join([*flags, str(target), _ziglang_version()]).encode())
-    for path in (*sources, *headers):
-        digest.update(Path(path).read_bytes())
-    library = WORK_DIR / "obj" / f"{name}-{digest.hexdigest()[:16]}{extension}"
-    if library.exists():
-        return library
-    if not compiler_available():
-        raise NativeBuildError(f"building {name} needs zig's C compiler: pip install ziglang "
-                               "(or pip install -e '.[native]')")
-    library.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=library.parent) as scratch:
-        output = Path(scratch) / library.name
-        environment = dict(os.environ)
-        environment.setdefault("ZIG_GLOBAL_CACHE_DIR", str(WORK_DIR / "zig-cache"))
-        environment.setdefault("ZIG_LOCAL_CACHE_DIR", str(WORK_DIR / "zig-cache"))
-        arguments = ["cc", *(["-target", target] if target else []), "-shared", "-fPIC", *flags,
-                     "-o", str(output), *map(str, sources), "-lm"]
-        completed = subprocess.run(_zig(*arguments), capture_output=True, text=True, env=environment, cwd=scratch)
-        if completed.returncode != 0:
-            raise NativeBuildError(f"compiling {name} failed:\n{completed.stderr}")
-        try:
-            os.replace(output, library)  # atomic: concurrent builders each write their own scratch copy
-        except OSError:
-            if not library.exists():  # Windows refuses to replace a DLL another process has loaded
-                raise
-    return library
+    return compile_cached(cached, f"{model.model_identifier}{target.extension}",
+                          [*arguments, "-o", "{output}", str(LAYER[0]), *map(str, model.c_sources)],
+                          f"{model.model_identifier} (FMI {fmi_version}, {target.zig})")
 
 
 def math_library() -> Path:
     """The controller's pure C modules (afc_math, initial_error_latch, chatter_monitor) as one
     shared library, for their tests through ctypes."""
     sources = [ROOT / "fmu_src" / f"{name}.c" for name in ("afc_math", "initial_error_latch", "chatter_monitor")]
-    return host_library("afc_math", sources, [p.with_suffix(".h") for p in sources])
+    return c_toolchain.host_library("afc_math", sources, [p.with_suffix(".h") for p in sources])
 
 
 def fat_macho(binaries: list[bytes]) -> bytes:
@@ -466,10 +328,10 @@ def _zip(files: dict[str, bytes]) -> bytes:
     return buffer.getvalue()
 
 
-def build_model(model: NativeModel, platforms=PLATFORMS, jobs: int = 2, zig_version: str | None = None,
+def build_model(model: FmuSource, platforms=PLATFORMS, jobs: int = 2, zig_version: str | None = None,
                 verbose: bool = False) -> dict[int, Path]:
     """Build one model's FMI 2.0 and 3.0 FMUs; return {2: path, 3: path}."""
-    zig_version = zig_version or _zig_version()
+    zig_version = zig_version or c_toolchain.zig_version()
     guid = model_guid(model.model_identifier)
     description2 = fmi2_description(model.model_identifier, guid)
     description3 = fmi3_description(description2)
@@ -484,7 +346,7 @@ def build_model(model: NativeModel, platforms=PLATFORMS, jobs: int = 2, zig_vers
         binaries = dict(zip(jobs_list, pool.map(
             lambda job: _compile(model, header_dir, job[0], job[1], zig_version), jobs_list)))
     name = model.model_identifier
-    sources = {f"sources/{p.name}": p.read_bytes() for p in (*LAYER, *model.sources, *model.headers, header)}
+    sources = {f"sources/{p.name}": p.read_bytes() for p in (*LAYER, *model.c_sources, *model.c_headers, header)}
     files2 = {"modelDescription.xml": _pretty(description2), **sources}
     files3 = {"modelDescription.xml": _pretty(description3), **sources}
     darwin = [binaries[(2, t)].read_bytes() for t in targets if t.platform == "darwin64"]
@@ -502,12 +364,12 @@ def build_model(model: NativeModel, platforms=PLATFORMS, jobs: int = 2, zig_vers
     return paths
 
 
-def _stamp(model: NativeModel, platforms) -> str:
+def _stamp(model: FmuSource, platforms) -> str:
     """What a built FMU depends on: sources, declaration, platforms."""
-    import build_fmu
     digest = hashlib.sha256(",".join(sorted(platforms)).encode())
-    python_sources = next(f for f in build_fmu.FMUS if f.model_identifier == model.model_identifier).sources
-    for path in (*LAYER, *model.sources, *model.headers, *python_sources, Path(__file__)):
+    # this module, the toolchain's flags and the FMU tables are inputs too
+    for path in (*LAYER, *model.c_sources, *model.c_headers, *model.sources, Path(__file__),
+                 Path(c_toolchain.__file__), Path(fmu_catalog.__file__), Path(plant_registry.__file__)):
         digest.update(path.read_bytes())
     return digest.hexdigest()
 
@@ -533,7 +395,7 @@ def ensure_built(platforms=None, force: bool = False, verbose: bool = False, job
         fresh = (not force and all(p.exists() for p in paths.values()) and stamp_file.exists()
                  and stamp_file.read_text() == stamp)
         if not fresh:
-            zig_version = zig_version or _zig_version()
+            zig_version = zig_version or c_toolchain.zig_version()
             build_model(model, platforms, jobs=jobs, zig_version=zig_version, verbose=verbose)
             _atomic_write(stamp_file, stamp.encode())
         result[model.model_identifier] = paths
@@ -556,6 +418,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    if str(ROOT) not in sys.path:
-        sys.path.insert(0, str(ROOT))
     sys.exit(main())

@@ -7,8 +7,8 @@ From that table this module derives
 * the pythonfmu registration (value references in table order),
 * the modelDescription.xml details pythonfmu 0.7 does not write: units,
   the ``dependencies`` of each output and the ``InitialUnknowns``,
-* the validation of parameters when initialisation ends,
-* the Markdown variable tables of the README (:func:`markdown_table`).
+* the validation of parameters when initialisation ends
+  (build_fmu.py renders the same rows as the variable tables of docs/model.md).
 
 The per-step path (``set_real``, ``get_real``, ``do_step``) is written for
 speed: value references index plain lists, values live in the instance
@@ -119,19 +119,6 @@ def non_negative(name, start, unit="", description=""):
 def finite(name, start, unit="", description=""):
     """A Real parameter that may take any finite value."""
     return Variable(name, PARAMETER, start, unit, description)
-
-
-def markdown_table(variables) -> str:
-    """The README table of an FMU's variables."""
-    lines = ["| name | causality | type | start | valid range | unit | meaning |",
-             "|---|---|---|---|---|---|---|"]
-    for v in variables:
-        valid = v.valid_range() if v.causality == PARAMETER else ""
-        if v.causality == OUTPUT:
-            valid = "depends on " + (", ".join(v.depends_on) if v.depends_on else "no input")
-        start = f"{v.start:.6g}" if v.causality != OUTPUT else ""
-        lines.append(f"| `{v.name}` | {v.causality} | {v.kind} | {start} | {valid} | {v.unit} | {v.description} |")
-    return "\n".join(lines)
 
 
 class FmuModelError(RuntimeError):

@@ -122,9 +122,9 @@ def apply_edition(args):
     """Select the edition for this command and the worker processes it starts; returns an undo."""
     import os
 
-    import build_fmu
+    import fmu_catalog
 
-    name = build_fmu.EDITION_VARIABLE
+    name = fmu_catalog.EDITION_VARIABLE
     before = os.environ.get(name)
     if getattr(args, "edition", None):
         os.environ[name] = args.edition
@@ -146,10 +146,10 @@ def main(argv=None) -> int:
         return done.code if isinstance(done.code, int) else cli_args.USAGE_EXIT
     undo = apply_edition(args)
     try:
-        import build_fmu
+        import fmu_catalog
 
-        if args.command in SSP_ENGINE_COMMANDS and os.environ.get(build_fmu.EDITION_VARIABLE) == "native3":
-            print(f"error: {build_fmu.EDITION_VARIABLE}=native3: {args.command} hands the FMUs to SSP engines, "
+        if args.command in SSP_ENGINE_COMMANDS and os.environ.get(fmu_catalog.EDITION_VARIABLE) == "native3":
+            print(f"error: {fmu_catalog.EDITION_VARIABLE}=native3: {args.command} hands the FMUs to SSP engines, "
                   "which take FMI 2.0 FMUs; use --edition native", file=sys.stderr)
             return cli_args.USAGE_EXIT
         return args.handler(args)

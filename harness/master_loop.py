@@ -20,6 +20,8 @@ import os
 import sys
 from pathlib import Path
 
+import c_toolchain
+
 SOURCE = Path(__file__).with_name("master_loop.c")
 ENVIRONMENT_SWITCH = "AFC_MASTER_LOOP"  # "python": always the Python loop; "c": the compiled one or an error
 CHOICES = ("auto", "python", "c")
@@ -91,13 +93,11 @@ def library(loop: str = "auto"):
 
 def _load():
     """Build (or find in the cache) and load the library; LoopUnavailable says why it cannot be."""
-    import build_native
-
-    if not build_native.compiler_available():
+    if not c_toolchain.compiler_available():
         raise LoopUnavailable("zig's C compiler is not installed (pip install -e '.[native]')")
     try:
-        function = ctypes.CDLL(str(build_native.host_library("master_loop", (SOURCE,)))).master_loop_run
-    except (build_native.NativeBuildError, OSError) as error:
+        function = ctypes.CDLL(str(c_toolchain.host_library("master_loop", (SOURCE,)))).master_loop_run
+    except (c_toolchain.NativeBuildError, OSError) as error:
         raise LoopUnavailable(f"the compiled loop {SOURCE.name} cannot be built or loaded: "
                               f"{str(error).strip().splitlines()[0]}") from error
     function.restype = ctypes.c_int

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import build_native
+import c_toolchain
 from harness import master_loop
 from harness import scenario as scenarios
 from harness.master import Master, SimulationFailed
@@ -326,14 +327,12 @@ def test_a_bad_progress_interval_is_refused_before_anything_runs(every):
 
 
 def test_auto_falls_back_to_the_python_loop_when_the_library_cannot_be_built(monkeypatch, capsys):
-    import build_native
-
     def broken(*args, **kwargs):
-        raise build_native.NativeBuildError("compiling master_loop failed:\nerror: no space left")
+        raise c_toolchain.NativeBuildError("compiling master_loop failed:\nerror: no space left")
 
     monkeypatch.setattr(master_loop, "_library", None)
     monkeypatch.setattr(master_loop, "_unavailable", None)
-    monkeypatch.setattr(build_native, "host_library", broken)
+    monkeypatch.setattr(c_toolchain, "host_library", broken)
     monkeypatch.delenv(master_loop.ENVIRONMENT_SWITCH, raising=False)
     assert master_loop.library() is None
     assert capsys.readouterr().err == ("warning: the master runs its Python loop: the compiled loop master_loop.c "

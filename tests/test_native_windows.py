@@ -33,11 +33,12 @@ import pytest
 from fmpy import read_model_description
 
 import build_native
+import c_toolchain
 from harness.scenario import scenario_names
 
 ROOT = Path(__file__).resolve().parents[1]
 HOST_SOURCE = ROOT / "tests" / "c_host" / "host.c"
-HOST_DIR = build_native.WORK_DIR / "hosts"
+HOST_DIR = c_toolchain.WORK_DIR / "hosts"
 DEFAULT_PREFIX = ROOT / "build" / "wine-prefix"
 # Largest |win64 - linux64| of an output, relative to that output's largest |value| in the run.
 # Measured: at most 1.8e-14 (the pendulum case's u) from the one-ulp libm differences; a defect
@@ -123,13 +124,13 @@ def wine(tmp_path_factory):
 def zig_build(target: str, output: Path, *extra: str) -> Path:
     """Compile the C host for a zig target; cached by the source, the target and zig's version."""
     arguments = ["cc", "-target", target, "-std=c11", "-O2", "-Wall", "-Wextra", "-Werror", *extra]
-    digest = hashlib.sha256("\0".join([build_native._zig_version(), *arguments]).encode() + HOST_SOURCE.read_bytes())
+    digest = hashlib.sha256("\0".join([c_toolchain.zig_version(), *arguments]).encode() + HOST_SOURCE.read_bytes())
     binary = HOST_DIR / f"{output.stem}-{digest.hexdigest()[:16]}{output.suffix}"
     if not binary.exists():
         HOST_DIR.mkdir(parents=True, exist_ok=True)
         environment = dict(os.environ)
-        environment.setdefault("ZIG_GLOBAL_CACHE_DIR", str(build_native.WORK_DIR / "zig-cache"))
-        environment.setdefault("ZIG_LOCAL_CACHE_DIR", str(build_native.WORK_DIR / "zig-cache"))
+        environment.setdefault("ZIG_GLOBAL_CACHE_DIR", str(c_toolchain.WORK_DIR / "zig-cache"))
+        environment.setdefault("ZIG_LOCAL_CACHE_DIR", str(c_toolchain.WORK_DIR / "zig-cache"))
         with tempfile.TemporaryDirectory(dir=HOST_DIR) as scratch:  # zig writes a .pdb beside a .exe
             built = Path(scratch) / output.name
             completed = subprocess.run([sys.executable, "-m", "ziglang", *arguments, "-o", str(built), str(HOST_SOURCE)],

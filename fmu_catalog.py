@@ -1,0 +1,92 @@
+"""The FMUs of the project, declared once for both builds (build_fmu.py, build_native.py) and the harness.
+
+One row per FMU: its model identifier, its pythonfmu script and the project files that travel with
+it (the reference edition), its C sources and headers (the native edition).  The controller's row
+is here; the plants' rows come from the plant registry (plants/registry.py).  Also declared here:
+the editions the harness runs, the folder each is built into, and the environment variable that
+selects one (``--edition`` sets it for a command and its worker processes).
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from plants import registry as plant_registry
+
+ROOT = Path(__file__).resolve().parent
+FMU_SRC = ROOT / "fmu_src"
+BASE = FMU_SRC / "afc_slave_base.py"  # the slave base class every pythonfmu FMU carries
+
+#: the editions the harness runs and where each is built: pythonfmu (the reference edition),
+#: C for FMI 2.0, C for FMI 3.0 (docs/native.md)
+FMU_DIR = ROOT / "build" / "fmus"
+NATIVE_DIR = FMU_DIR / "native"
+FMI3_DIR = NATIVE_DIR / "fmi3"
+EDITIONS = ("python", "native", "native3")
+#: the edition the harness runs (``--edition`` sets it for the process and its workers)
+EDITION_VARIABLE = "AFC_EDITION"
+
+
+@dataclass(frozen=True)
+class FmuSource:
+    model_identifier: str
+    script: Path  # the pythonfmu script (a unique file name: pythonfmu loads every FMU into one interpreter)
+    project_files: tuple[Path, ...]  # what travels with the script (the base class first)
+    c_sources: tuple[Path, ...] = ()  # compiled with fmu_src/fmi_layer.c into the native edition
+    c_headers: tuple[Path, ...] = ()
+
+    @property
+    def fmu_path(self) -> Path:
+        """The pythonfmu edition's FMU."""
+        return FMU_DIR / f"{self.model_identifier}.fmu"
+
+    @property
+    def sources(self) -> tuple[Path, ...]:
+        """The pythonfmu edition's sources (a build is stale when one is newer than the FMU)."""
+        return (self.script, *self.project_files)
+
+
+CONTROLLER = FmuSource(
+    "AdaptiveFuzzyController", FMU_SRC / "adaptive_fuzzy_controller_fmu.py",
+    (BASE, FMU_SRC / "afc_math.py", FMU_SRC / "initial_error_latch.py", FMU_SRC / "chatter_monitor.py"),
+    (FMU_SRC / "adaptive_fuzzy_controller.c", FMU_SRC / "afc_math.c", FMU_SRC / "initial_error_latch.c",
+     FMU_SRC / "chatter_monitor.c"),
+    (FMU_SRC / "afc_math.h", FMU_SRC / "initial_error_latch.h", FMU_SRC / "chatter_monitor.h"))
+
+FMUS = (CONTROLLER, *(FmuSource(row.model_identifier, row.script, (BASE, *row.project_files), row.c_sources,
+                                row.c_headers) for row in plant_registry.PLANT_FMUS))
+
+
+def fmu(model_identifier: str) -> FmuSource:
+    for row in FMUS:
+        if row.model_identifier == model_identifier:
+            return row
+    raise KeyError(f"unknown FMU {model_identifier!r}; valid: {[f.model_identifier for f in FMUS]}")
+
+
+def model_class(model_identifier: str):
+    """The slave class of an FMU, imported as the FMU imports it (top-level modules)."""
+    row = fmu(model_identifier)
+    for folder in {str(p.parent) for p in row.sources}:
+        if folder not in sys.path:
+            sys.path.insert(0, folder)
+    return getattr(importlib.import_module(row.script.stem), model_identifier)
+
+
+def selected_edition() -> str:
+    """$AFC_EDITION, else "python"; an invalid value is one clear error."""
+    edition = os.environ.get(EDITION_VARIABLE, "python") or "python"
+    if edition not in EDITIONS:
+        raise SystemExit(f"error: {EDITION_VARIABLE}={edition!r} is invalid; valid: {', '.join(EDITIONS)}")
+    return edition
+
+
+def ordinary_file_mode(path) -> None:
+    """Give a file made by mkstemp (private, 0600) the mode of an ordinary new file (0666 less the umask):
+    both builds write every FMU through a temporary file replaced in one step."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
