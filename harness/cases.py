@@ -4,7 +4,7 @@ A :class:`Case` is one co-simulation: a scenario x a controller x settings (step
 master algorithm, parameter overrides, FMU files) and what to bring back besides the
 scores (signals thinned to an interval, or resampled to a number of points).
 :func:`run_case` runs it and returns its *outcome*: a plain dict (it travels between
-processes and into CSV/JSON files) with the scores of SPEC section 7 and a status:
+processes and into CSV/JSON files) with the scores of docs/model.md section 9 (scores) and a status:
 
 * ``ok``: the run completed; every score is there;
 * ``diverged``: the master's divergence bound stopped it, or a plant FMU reported that
@@ -26,7 +26,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+import build_fmu
+
+from . import master_loop
 from . import scenario as scenarios
+from .fmi import FmiError
+from .master import Divergence, SimulationFailed, simulate
+from .scores import score_run
 
 FIGURE_SIGNALS = ("plant.y", "plant.dy", "reference.ym", "reference.dym", "reference.e", "reference.de",
                   "controller.u")
@@ -91,9 +97,6 @@ def one_line(text: str, limit: int = REASON_LIMIT) -> str:
 
 def status_of(error: BaseException) -> str:
     """``diverged`` or ``failed`` for the exception that stopped a run."""
-    from .fmi import FmiError
-    from .master import Divergence
-
     cause = getattr(error, "cause", error)
     if isinstance(cause, Divergence):
         return "diverged"
@@ -116,9 +119,6 @@ def resample(time: np.ndarray, values: np.ndarray, start: float, stop: float, po
 
 def run_case(case: Case, fmu_paths: dict | None = None) -> dict:
     """The outcome of one case (see the module's doc); never raises for a failing simulation."""
-    from .master import SimulationFailed, simulate
-    from .scores import score_run
-
     scenario = case.build()
     outcome = {"scenario": case.scenario_name, "controller": case.controller, "step": scenario.step,
                "start": scenario.start, "stop": scenario.stop, "algorithm": case.algorithm,
@@ -164,7 +164,7 @@ def parallel_map(function, items: list, jobs: int | None = None, description: st
     Workers are spawned, clean interpreters: loaded FMUs (and Ecos's threads) never cross a
     fork.  ``function`` must be picklable (a module-level function or a functools.partial).
     """
-    from tqdm import tqdm
+    from tqdm import tqdm  # here, not at module level: 0.1-0.3 s of import that a CLI start without a study skips
 
     jobs = max(1, min(len(items), jobs or default_jobs()))
     show = sys.stderr.isatty() if progress is None else progress
@@ -189,11 +189,7 @@ def run_cases(cases: list, jobs: int | None = None, description: str = "co-simul
     for case in cases:  # a mistake in a case (a stop off the step grid, ...) is one error before any run
         case.build()
     if fmu_paths is None:
-        import build_fmu
-
         fmu_paths = build_fmu.ensure_built()  # once, before the workers start
-    from . import master_loop
-
     master_loop.library()  # the compiled loop too (when zig is installed), so no two workers compile it
     return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths), cases, jobs, description, progress)
 

@@ -1,4 +1,9 @@
-"""Command line: ``python -m harness run SCENARIO --controller vud`` (also ``afc-harness``)."""
+"""Command line: ``python -m harness run SCENARIO --controller vud`` (also ``afc-harness``).
+
+The composition root of the harness: it registers every subcommand (``run`` here; each study and
+host runner in its own module's ``register(commands)``) and so is the one core module that imports
+the studies (harness/studies/) and the host runners (harness/hosts/).
+"""
 from __future__ import annotations
 
 import argparse
@@ -6,16 +11,21 @@ import json
 import os
 import sys
 
-from . import cli_args
+import fmu_catalog
+from c_toolchain import NativeBuildError
+
+from . import cli_args, variants
 from . import scenario as scenarios
+from .hosts import bench, engines, matrix, ssp
 from .master import ALGORITHMS, SimulationFailed, simulate
 from .scores import SCORE_KEYS, score_run
+from .studies import mutation, regression, step_study, sweep, tables
 
 
 def _progress_bar(total: int, description: str, enabled: bool):
     if not enabled:
         return None, lambda: None
-    from tqdm import tqdm
+    from tqdm import tqdm  # here, not at module level: 0.1-0.3 s of import that --help and --json runs skip
 
     bar = tqdm(total=total, desc=description, unit="step", unit_scale=True, leave=False, file=sys.stderr)
 
@@ -42,9 +52,8 @@ def run_command(args) -> int:
         return cli_args.report(failure)
     close()
     if scenario.path is not None and scenario.path.parent == scenarios.SCENARIO_DIR:  # one the study covers
-        from .step_study import step_warning  # after the run: a failed run says one line, its error
-
-        warning = step_warning(scenario.name, args.controller, args.algorithm, scenario.step)
+        # after the run: a failed run says one line, its error
+        warning = step_study.step_warning(scenario.name, args.controller, args.algorithm, scenario.step)
         if warning:
             print(warning, file=sys.stderr)
     if args.out:
@@ -71,7 +80,7 @@ def run_command(args) -> int:
 def register_run(commands):
     run = commands.add_parser("run", help="run one scenario with one controller and score it")
     run.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
-    run.add_argument("--controller", choices=tuple(scenarios.CONTROLLER_VARIANTS), default="vud")
+    run.add_argument("--controller", choices=variants.NAMES, default=variants.PROPOSED)
     run.add_argument("--step", type=cli_args.positive_float, help="communication step in s (default: the scenario's)")
     run.add_argument("--stop", type=cli_args.positive_float, help="stop time in s (default: the scenario's)")
     run.add_argument("--algorithm", choices=ALGORITHMS, default="feedthrough",
@@ -84,19 +93,16 @@ def register_run(commands):
     run.set_defaults(handler=run_command)
 
 
-def _subcommand_registrations():
-    """Each subcommand lives in its own module with a ``register(commands)`` function."""
-    from . import bench, engines, hosts, mutation, regression, report_tables, ssp, step_study, sweep
-
-    return [register_run, report_tables.register, step_study.register, sweep.register, regression.register,
-            ssp.register, engines.register, bench.register, mutation.register, hosts.register]
+#: every subcommand, in the order of ``--help``: each lives in its own module with a ``register(commands)``
+SUBCOMMAND_REGISTRATIONS = (register_run, tables.register, step_study.register, sweep.register, regression.register,
+                            ssp.register, engines.register, bench.register, mutation.register, matrix.register)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = cli_args.OneLineParser(prog="python -m harness",
                                     description="Co-simulation of the adaptive fuzzy controller FMUs")
     commands = parser.add_subparsers(dest="command", required=True)
-    for register in _subcommand_registrations():
+    for register in SUBCOMMAND_REGISTRATIONS:
         register(commands)
     for name, command in commands.choices.items():
         add_edition_argument(command, fmi3=name not in SSP_ENGINE_COMMANDS)
@@ -110,7 +116,7 @@ SSP_ENGINE_COMMANDS = ("export-ssp", "compare-engines", "hosts")
 def add_edition_argument(parser: argparse.ArgumentParser, fmi3: bool = True) -> None:
     """``--edition``: which FMUs the command runs (one option, shared by every command);
     ``fmi3=False`` leaves out native3 (the SSP engines take FMI 2.0 FMUs)."""
-    parser.add_argument("--edition", choices=("python", "native", "native3") if fmi3 else ("python", "native"),
+    parser.add_argument("--edition", choices=fmu_catalog.EDITIONS if fmi3 else ("python", "native"),
                         default=None,
                         help="python: the pythonfmu FMUs (reference edition); native: the C FMUs, FMI 2.0"
                              + ("; native3: the C FMUs, FMI 3.0 (our master only; docs/native.md)" if fmi3 else
@@ -120,10 +126,6 @@ def add_edition_argument(parser: argparse.ArgumentParser, fmi3: bool = True) -> 
 
 def apply_edition(args):
     """Select the edition for this command and the worker processes it starts; returns an undo."""
-    import os
-
-    import fmu_catalog
-
     name = fmu_catalog.EDITION_VARIABLE
     before = os.environ.get(name)
     if getattr(args, "edition", None):
@@ -146,8 +148,6 @@ def main(argv=None) -> int:
         return done.code if isinstance(done.code, int) else cli_args.USAGE_EXIT
     undo = apply_edition(args)
     try:
-        import fmu_catalog
-
         if args.command in SSP_ENGINE_COMMANDS and os.environ.get(fmu_catalog.EDITION_VARIABLE) == "native3":
             print(f"error: {fmu_catalog.EDITION_VARIABLE}=native3: {args.command} hands the FMUs to SSP engines, "
                   "which take FMI 2.0 FMUs; use --edition native", file=sys.stderr)
@@ -158,6 +158,6 @@ def main(argv=None) -> int:
         return 130
     except Exception as error:  # noqa: BLE001 - the last resort: no traceback reaches a user
         status = cli_args.report(error)
-        return cli_args.USAGE_EXIT if type(error).__name__ == "NativeBuildError" else status
+        return cli_args.USAGE_EXIT if isinstance(error, NativeBuildError) else status
     finally:
         undo()

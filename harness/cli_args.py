@@ -13,9 +13,16 @@ from __future__ import annotations
 import argparse
 import math
 import re
+import shutil
+import subprocess
 import sys
 import zipfile
 from pathlib import Path
+
+from . import scenario as scenarios
+from .fmi import FmiError, ModelInfo
+from .master import SimulationFailed, resolve_fmu, simulate
+from .scenario import ScenarioError
 
 USAGE_EXIT = 2  # a mistake in the command line or in a scenario file
 FAILED_EXIT = 1  # the command ran and failed (a diverged or crashed run, a failing regression)
@@ -105,8 +112,6 @@ def ssp_file(text: str) -> Path:
 
 def scenario(text: str) -> str:
     """A scenario name of harness/scenarios/ or the path of an existing .toml file."""
-    from . import scenario as scenarios
-
     if text.endswith(".toml") or "/" in text or "\\" in text:
         path = Path(text)
         if not path.exists():
@@ -121,8 +126,6 @@ def scenario(text: str) -> str:
 
 
 def scenario_help() -> str:
-    from . import scenario as scenarios
-
     return f"scenario name ({', '.join(scenarios.scenario_names())}) or .toml path"
 
 
@@ -145,9 +148,6 @@ def check_assignments(configured, assignments, fmu_paths: dict | None = None, op
     valid choices; an exclusive bound (e.g. gamma > 0) is checked by the FMU itself when
     initialisation ends, and :func:`one_line` reports that as a usage error too.
     """
-    from .fmi import ModelInfo
-    from .master import resolve_fmu
-
     infos = {}
     for dotted, value in assignments:
         instance, _, parameter = dotted.partition(".")
@@ -177,8 +177,6 @@ def check_assignments(configured, assignments, fmu_paths: dict | None = None, op
 
 def _initialise_once(configured, assignments, fmu_paths, option):
     """Run one communication step with the new values; a parameter the FMU rejects is a usage error."""
-    from .master import SimulationFailed, simulate
-
     trial = configured
     for dotted, value in assignments:
         trial = trial.with_parameter(dotted, value)
@@ -193,9 +191,6 @@ def _initialise_once(configured, assignments, fmu_paths, option):
 # ------------------------------------------------------ committed files
 def tracked_files(paths) -> list:
     """Those of ``paths`` that the project's git repository tracks (none without git or outside it)."""
-    import shutil
-    import subprocess
-
     root = Path(__file__).resolve().parents[1]
     if shutil.which("git") is None or not (root / ".git").exists():
         return []
@@ -224,9 +219,7 @@ PERIOD_SCORES = ("es1_pct", "es2_pct")  # taken over the last reference period [
 
 def short_horizon_note(configured) -> str:
     """A word for es1/es2 when the run is shorter than the reference period they are taken over."""
-    import math as _math
-
-    if configured.stop - configured.start < 2 * _math.pi - 1e-9:
+    if configured.stop - configured.start < 2 * math.pi - 1e-9:
         return " (stop < 2 pi: the last reference period they are taken over is not there)"
     return ""
 
@@ -258,8 +251,6 @@ def _fmu_messages(log) -> list:
 
 
 def _fmi_error(error):
-    from .fmi import FmiError
-
     for candidate in (error, getattr(error, "cause", None), error.__cause__):
         if isinstance(candidate, FmiError):
             return candidate
@@ -287,8 +278,6 @@ def one_line(error: BaseException) -> str:
 
 def exit_status(error: BaseException) -> int:
     """2 for a usage mistake (also a parameter the FMU rejects when initialisation ends), else 1."""
-    from .scenario import ScenarioError
-
     if isinstance(error, (UsageError, ScenarioError)):
         return USAGE_EXIT
     fmi = _fmi_error(error)

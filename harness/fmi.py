@@ -21,6 +21,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Real,
                        fmi2ValueReference)
 from fmpy.fmi2 import defaultCallbacks as _fmpy_default_callbacks
+from fmpy.fmi3 import FMU3Slave, fmi3Boolean, fmi3Float64
 
 STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal", "pending")
 FMI3_TYPE_NAMES = {"Float64": "Real", "Int32": "Integer"}
@@ -133,8 +134,6 @@ class Component:
 
     def _instantiate3(self, logging_on: bool):
         """FMI 3.0 co-simulation through fmpy's FMU3Slave; the same per-step interface."""
-        from fmpy.fmi3 import FMU3Slave, fmi3Boolean, fmi3Float64
-
         self.slave = self._call("loading the FMU's shared library", lambda: FMU3Slave(
             guid=self.info.guid, unzipDirectory=self.unzip_dir,
             modelIdentifier=self.info.model_identifier, instanceName=self.name))

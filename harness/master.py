@@ -26,8 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .fmi import BoundArrayCall, Component, FmiError, ModelInfo
+import build_fmu
+
 from . import master_loop
+from .fmi import BoundArrayCall, Component, FmiError, ModelInfo
 from .scenario import Scenario, ScenarioError
 
 ALGORITHMS = ("feedthrough", "jacobi")
@@ -101,8 +103,6 @@ def resolve_fmu(spec_fmu: str, scenario: Scenario, built: dict | None) -> Path:
             raise ScenarioError(f"FMU file not found: {path}")
         return path
     if built is None:
-        import build_fmu
-
         built = build_fmu.ensure_built()
     if spec_fmu not in built:
         raise ScenarioError(f"unknown FMU {spec_fmu!r}; valid: {', '.join(sorted(built))} or a path to an .fmu file")

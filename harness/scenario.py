@@ -19,8 +19,9 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
+from .variants import CONTROLLER_VARIANTS
+
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
-CONTROLLER_VARIANTS = {"vud": 1, "fixed": 2, "fae": 3}
 SIGNAL_ROLES = ("e", "de", "ym", "dym", "u", "d2e", "d3e")  # d2e, d3e: plants of order 3, 4
 
 

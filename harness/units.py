@@ -9,21 +9,21 @@ from __future__ import annotations
 
 import functools
 
+from fmpy import read_model_description
+
+from .master import resolve_fmu
+
 #: controller outputs in the unit of u: the control itself, the rule weights and the error estimate
 IN_UNITS_OF_U = ("u", "theta", "w_hat")
 
 
 @functools.lru_cache(maxsize=None)
 def _declared_units(fmu_path: str) -> dict:
-    from fmpy import read_model_description
-
     return {v.name: (v.unit or (v.declaredType.unit if v.declaredType is not None else None) or "")
             for v in read_model_description(fmu_path).modelVariables}
 
 
 def _fmu_path(scenario, instance: str) -> str:
-    from .master import resolve_fmu
-
     return str(resolve_fmu(scenario.components[instance].fmu, scenario, None))
 
 

@@ -44,7 +44,7 @@ def test_bench_json_reports_every_figure_and_times_the_right_runs(fmu_paths, cap
 
 
 def test_bench_times_the_main_job_in_both_editions_when_asked(monkeypatch, capsys):
-    from harness import bench
+    from harness.hosts import bench
 
     monkeypatch.setattr(bench, "bench", lambda *args: {**FAKE_FIGURES, "notes": {}})
     timed = []
@@ -57,7 +57,7 @@ def test_bench_times_the_main_job_in_both_editions_when_asked(monkeypatch, capsy
 
 
 def test_the_main_job_is_timed_as_a_user_runs_it(fmu_paths):
-    from harness import bench
+    from harness.hosts import bench
 
     assert bench.tables_wall_seconds("python", stop=0.05) > 0
     with pytest.raises(RuntimeError, match=r"tables --edition native failed: .*--stop"):

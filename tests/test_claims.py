@@ -1,10 +1,10 @@
-"""The verdict logic of the claims check (harness/claims.py) on synthetic step ladders."""
+"""The verdict logic of the claims check (harness/studies/claims.py) on synthetic step ladders."""
 import math
 
 import pytest
 
-from harness import claims
-from harness.claims import NOT_REPRODUCED, REPRODUCED, UNDECIDED, Estimate
+from harness.studies import claims, tables
+from harness.studies.claims import NOT_REPRODUCED, REPRODUCED, UNDECIDED, Estimate
 
 STEP = 4e-4
 METRICS = ("ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec", "tv_u")
@@ -180,8 +180,6 @@ def test_plus_minus_keeps_two_digits_of_the_error():
 def test_refinement_runs_the_open_cases_at_half_their_finest_step_and_decides_again(monkeypatch):
     """refine_open_claims asks for exactly the cases of open comparisons, at half their finest
     step, appends their runs and decides again; it stops when nothing is open."""
-    from harness import report_tables
-
     ladder_set = ladders({("pendulum_case1", "vud", "Ec"): (418.234, 418.222),
                           ("pendulum_case1", "fixed", "Ec"): (430.500, 430.485),
                           ("pendulum_case1", "fae", "Ec"): (418.322, 418.169)})
@@ -198,13 +196,13 @@ def test_refinement_runs_the_open_cases_at_half_their_finest_step_and_decides_ag
                         **{m: DEFAULT[c.controller] for m in METRICS if m != "Ec"}, Ec=finer[c.controller])
                 for c in cases]
 
-    monkeypatch.setattr(report_tables, "run_cases", fake_run_cases)
-    found, refined = report_tables.refine_open_claims(ladder_set, stop=None, jobs=1, levels=3)
+    monkeypatch.setattr(tables, "run_cases", fake_run_cases)
+    found, refined = tables.refine_open_claims(ladder_set, stop=None, jobs=1, levels=3)
     assert len(requested) == 1  # one level was enough
     assert sorted(requested[0]) == [("pendulum_case1", "fae", STEP / 4), ("pendulum_case1", "vud", STEP / 4)]
     assert sorted(refined) == sorted(requested[0])
     assert [c.verdict for c in found if "control energy" in c.label] == [NOT_REPRODUCED]
     assert all(c.verdict != UNDECIDED for c in found)
     requested.clear()
-    assert report_tables.refine_open_claims(ladders(), stop=None, jobs=1, levels=3)[1] == []
+    assert tables.refine_open_claims(ladders(), stop=None, jobs=1, levels=3)[1] == []
     assert requested == []  # nothing open: nothing run

@@ -47,7 +47,7 @@ def files(tmp_path_factory):
 @pytest.fixture(scope="module")
 def real_ssp(fmu_paths, tmp_path_factory):
     from harness import scenario as scenarios
-    from harness.ssp import export_ssp
+    from harness.hosts.ssp import export_ssp
 
     configured = scenarios.configure("pendulum_case1", "vud", stop=0.1)
     return str(export_ssp(configured, tmp_path_factory.mktemp("ssp") / "p.ssp", fmu_paths=fmu_paths))
@@ -255,7 +255,7 @@ def test_es1_es2_are_marked_n_a_on_a_horizon_shorter_than_the_reference_period(f
 
 
 def test_sweep_writes_docs_only_with_apply_and_says_what_it_changed(fmu_paths, tmp_path, monkeypatch, capsys):
-    from harness import sweep
+    from harness.studies import sweep
 
     docs = tmp_path / "docs"
     docs.mkdir()

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 import build_fmu
-from harness import engines, scenario as scenarios
+from harness import scenario as scenarios
+from harness.hosts import engines
 from harness.cli import main as cli_main
-from harness.ssp import PARAMETER_SET, export_ssp
+from harness.hosts.ssp import PARAMETER_SET, export_ssp
 
 STEP = 2.5e-5
 SKIP = 3 * STEP  # fmpy's start transient: its connectors are 0 during the first two steps

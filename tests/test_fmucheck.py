@@ -47,7 +47,7 @@ def test_the_controller_passes_at_its_default_experiment_step(fmu_paths):
 
 
 def test_the_benchmark_floor_fmus_pass_too(tmp_path):
-    from harness.bench import build_null_fmus
+    from harness.hosts.bench import build_null_fmus
 
     for path in build_null_fmus(tmp_path).values():
         assert_strict_pass(fmucheck(path), path.stem)

@@ -1,4 +1,4 @@
-"""The host matrix (harness/hosts.py) on a short horizon: every host at its validated step is within 1 %
+"""The host matrix (harness/hosts/matrix.py) on a short horizon: every host at its validated step is within 1 %
 of our converged result with no warning; every chattering row carries the controller's step warning.
 
 The comparison is with our own converged result over the same short horizon (Richardson of our
@@ -6,7 +6,7 @@ feedthrough master), so a short horizon tests the same thing as the 20 s of docs
 """
 import pytest
 
-from harness import hosts
+from harness.hosts import matrix as hosts
 from harness import scenario as scenarios
 
 STOP = 1.0  # s: the rows at the validated step (10 000 steps at the pendulum's Jacobi one)

@@ -12,7 +12,7 @@ import build_fmu
 from harness import scenario as scenarios
 from harness.cli import main as cli_main
 from harness.master import Master, SimulationFailed, simulate
-from harness.oracle import simulate_oracle
+from harness.studies.oracle import simulate_oracle
 from harness.scenario import ScenarioError
 
 ROOT = Path(__file__).resolve().parents[1]

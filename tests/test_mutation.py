@@ -1,8 +1,8 @@
-"""The mutation command (harness/mutation.py) itself: one mutant killed, one survivor reported,
+"""The mutation command (harness/studies/mutation.py) itself: one mutant killed, one survivor reported,
 patterns applied inside their function only, a pattern that no longer matches reported.
 
 The full mutation run (every mutant) is ``python -m harness mutate``, not part of this suite."""
-from harness import mutation
+from harness.studies import mutation
 from harness.cli import main as cli_main
 
 

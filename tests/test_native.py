@@ -540,8 +540,8 @@ def test_libcosim_runs_the_native_fmus_from_the_exported_ssp_as_the_python_ones(
     the native and pythonfmu editions give the same values."""
     pytest.importorskip("libcosimpy")
     from harness import scenario as scenarios
-    from harness import ssp
-    from harness.libcosim_engine import run_libcosim, with_algorithm
+    from harness.hosts import ssp
+    from harness.hosts.libcosim import run_libcosim, with_algorithm
 
     configured = scenarios.configure("pendulum_case1", "vud", None, 0.3)
     signals = ("plant.y", "plant.dy", "controller.u", "controller.theta1", "reference.e")

@@ -9,7 +9,7 @@ import pytest
 
 import build_fmu
 from harness import scenario as scenarios
-from harness import sweep_executors, sweep_grid
+from harness.studies import sweep_executors, sweep_grid
 from harness.cases import Case, run_case
 from harness.cli import main as cli_main
 from harness.scenario import ScenarioError

@@ -10,9 +10,9 @@ import os
 import numpy as np
 import pytest
 
-from harness import regression
+from harness.studies import regression
 from harness.cli import main as cli_main
-from harness.regression import Case, CaseRun
+from harness.studies.regression import Case, CaseRun
 
 MUTATION = Case("pendulum_case1", "vud", overrides=(("controller.gamma", 290.0),))
 

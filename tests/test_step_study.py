@@ -1,4 +1,4 @@
-"""The step study by accuracy (harness/step_study.py): search, criterion, outputs, and what uses it."""
+"""The step study by accuracy (harness/studies/step_study.py): search, criterion, outputs, and what uses it."""
 import json
 import math
 import re
@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from harness import scenario as scenarios
-from harness import step_study
+from harness.studies import step_study
 from harness.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -159,7 +159,7 @@ def test_controller_default_experiment_is_jacobi_safe_on_the_pendulum(fmu_paths,
 
 
 def test_export_ssp_carries_the_jacobi_validated_step_unless_given(fmu_paths, committed, tmp_path):
-    from harness.engines import read_package
+    from harness.hosts.engines import read_package
 
     package = tmp_path / "p.ssp"
     assert cli_main(["export-ssp", "manipulator", "--controller", "fae", "--out", str(package)]) == 0

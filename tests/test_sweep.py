@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness import sweep, sweep_csv, sweep_executors, sweep_grid, sweep_heatmap
+from harness.studies import sweep, sweep_csv, sweep_executors, sweep_grid, sweep_heatmap
 from harness.cli import main as cli_main
 from harness.scenario import ScenarioError
 

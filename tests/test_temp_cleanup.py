@@ -54,7 +54,7 @@ def test_a_failed_instantiation_leaves_nothing(fmu_paths, temp_dir):
 
 
 def test_an_ecos_run_leaves_nothing(fmu_paths, temp_dir, tmp_path):
-    from harness import engines, ssp
+    from harness.hosts import engines, ssp
 
     try:
         engines.import_ecospy()

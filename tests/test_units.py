@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from harness import report_tables, scenario as scenarios, sweep, units
+from harness import scenario as scenarios, units
+from harness.studies import sweep, tables
 
 
 @pytest.mark.parametrize("name,force", [("pendulum_case1", "N"), ("manipulator", "N.m")])
@@ -43,7 +44,7 @@ def _signals(time):
 def test_table_figures_label_every_panel_with_its_unit(fmu_paths, drawn_axes, tmp_path):
     rows = [{"scenario": name, "controller": controller, "signals": _signals(np.linspace(0, 1, 11))}
             for name in ("pendulum_case1", "manipulator") for controller in ("vud", "fixed", "fae")]
-    report_tables.figures(rows, tmp_path)
+    tables.figures(rows, tmp_path)
     titles = [title for title, _, _ in drawn_axes]
     assert titles.count("u (N)") == 1 and titles.count("u (N.m)") == 1
     for title, xlabel, ylabel in drawn_axes:

@@ -32,7 +32,13 @@ import time as clock
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+import build_fmu
+import fmu_catalog
+
+from .. import cli_args
+from ..cases import parallel_map
+
+ROOT = Path(__file__).resolve().parents[2]
 CONTROLLER_TESTS = ("tests/test_adaptive_law_fmu.py", "tests/test_independent_loop.py",
                     "tests/test_controller_math.py", "tests/test_controller_fmu.py")
 PLANT_TESTS = ("tests/test_plants.py", "tests/test_independent_loop.py")
@@ -242,10 +248,8 @@ def copy_repository(root: Path, target: Path, built: dict):
 
 def stale_fmus(mutation: Mutation, target: Path) -> list[Path]:
     """The copied FMUs built from the mutated file: removed so the tests rebuild them."""
-    import build_fmu
-
     mutated = (ROOT / mutation.path).resolve()
-    return [target / "build" / "fmus" / f"{f.model_identifier}.fmu" for f in build_fmu.FMUS
+    return [target / "build" / "fmus" / f"{f.model_identifier}.fmu" for f in fmu_catalog.FMUS
             if any(Path(source).resolve() == mutated for source in f.sources)]
 
 
@@ -303,9 +307,7 @@ def select(names) -> list:
     known = {m.name: m for m in MUTATIONS}
     unknown = [n for n in names if n not in known]
     if unknown:
-        from .cli_args import UsageError
-
-        raise UsageError(f"unknown mutation {', '.join(unknown)}; valid: {', '.join(known)}")
+        raise cli_args.UsageError(f"unknown mutation {', '.join(unknown)}; valid: {', '.join(known)}")
     return [known[n] for n in names]
 
 
@@ -319,9 +321,6 @@ def mutate_command(args) -> int:
             print(f"{mutation.name:32s} {mutation.path}:{mutation.function}  "
                   f"{'PATTERN NOT FOUND: ' + problem if problem else 'ok'}")
         return 2 if missing else 0
-    import build_fmu
-    from .cases import parallel_map
-
     built = build_fmu.ensure_built()
     tests = tuple(args.tests) if args.tests else None
     started = clock.perf_counter()
@@ -338,7 +337,7 @@ def mutate_command(args) -> int:
         print(f"  survived: {outcome.mutation.name} ({outcome.mutation.why}; {outcome.mutation.path}:"
               f"{outcome.mutation.function})")
     for outcome in missing:
-        advice = ("update its pattern in harness/mutation.py" if outcome.status == "pattern not found"
+        advice = ("update its pattern in harness/studies/mutation.py" if outcome.status == "pattern not found"
                   else "the test selection did not run")
         print(f"error: mutation {outcome.mutation.name}: {outcome.status}: {outcome.detail}; {advice}",
               file=sys.stderr)
@@ -350,8 +349,6 @@ def _run_one(arguments: tuple) -> Outcome:
 
 
 def register(commands):
-    from . import cli_args
-
     parser = commands.add_parser("mutate", help="mutation testing of fmu_src/ and plants/: score and survivors")
     parser.add_argument("--only", nargs="+", metavar="NAME", help="these mutations (default: all)")
     parser.add_argument("--list", action="store_true", help="list the mutations and check their patterns")

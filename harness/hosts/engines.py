@@ -1,4 +1,4 @@
-"""Run an exported SSP package (harness/ssp.py) unchanged in FMI engines that are not ours.
+"""Run an exported SSP package (harness/hosts/ssp.py) unchanged in FMI engines that are not ours.
 
 * :func:`run_fmpy_ssp`: fmpy's SSP simulator, ``fmpy.ssp.simulation.simulate_ssp``
   (fmpy 0.3.x).
@@ -59,8 +59,11 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import functools
+import importlib.metadata
 import os
+import shutil
 import sys
+import tempfile
 import time as clock
 import xml.etree.ElementTree as ElementTree
 import zipfile
@@ -68,6 +71,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from fmpy.ssp.simulation import simulate_ssp
+from fmpy.ssp.ssd import Parameter, ParameterSet, find_components, read_ssd
+
+import build_fmu
+
+from .. import cli_args, variants
+from .. import scenario as scenarios
+from ..cases import parallel_map
+from ..master import simulate
+from ..scores import control_energy, iae, itae, score
+from ..studies.regression import compare_signal
+from .ssp import export_ssp
 
 ENGINES = ("master", "jacobi", "fmpy", "ecos")
 AFC_NS = "https://afc-fmi.invalid/ssp/experiment"
@@ -162,15 +177,13 @@ def read_package(path) -> Package:
 
 
 def _experiment(package: Package, stop, step) -> tuple[float, float, float, int]:
-    from .cli_args import UsageError  # a ValueError: an experiment the package cannot run
-
     stop = package.stop if stop is None else float(stop)
     step = package.step if step is None else float(step)
     if stop is None or step is None:
-        raise UsageError(f"{package.path.name}: give --stop and --step (the package has no default for them)")
+        raise cli_args.UsageError(f"{package.path.name}: give --stop and --step (the package has no default for them)")
     steps = round((stop - package.start) / step)
     if steps < 1:
-        raise UsageError(f"stop - start = {stop - package.start} is shorter than one step {step}")
+        raise cli_args.UsageError(f"stop - start = {stop - package.start} is shorter than one step {step}")
     return package.start, stop, step, steps
 
 
@@ -178,9 +191,6 @@ def _experiment(package: Package, stop, step) -> tuple[float, float, float, int]
 def run_fmpy_ssp(ssp_path, stop: float | None = None, step: float | None = None,
                  apply_package_parameters: bool = True) -> EngineResult:
     """Run the package in fmpy's SSP simulator; rows restamped to the time their values belong to."""
-    from fmpy.ssp.simulation import simulate_ssp
-    from fmpy.ssp.ssd import Parameter, ParameterSet, find_components, read_ssd
-
     package = read_package(ssp_path)
     start, stop, step, steps = _experiment(package, stop, step)
     parameter_set = None
@@ -219,8 +229,6 @@ def load_tbb():
     global _TBB
     if _TBB is not None:
         return _TBB
-    import importlib.metadata
-
     try:
         files = importlib.metadata.distribution("tbb").files or []
     except importlib.metadata.PackageNotFoundError:
@@ -237,7 +245,7 @@ def load_tbb():
 def import_ecospy():
     load_tbb()
     try:
-        import ecospy
+        import ecospy  # here, not at module level: it loads only after load_tbb() (and is 0.2 s of import)
     except ImportError as error:
         raise EngineUnavailable(f"cannot import ecospy ({error}): pip install ecospy tbb") from error
     return ecospy
@@ -252,9 +260,6 @@ def ecos_temp_dir():
     at a folder of our own while the simulation lives; then it is restored and the
     folder removed, so nothing is left and no other process's folders are touched.
     """
-    import shutil
-    import tempfile
-
     folder = tempfile.mkdtemp(prefix="afc_ecos_")
     previous = os.environ.get("TMPDIR")
     os.environ["TMPDIR"] = folder
@@ -311,8 +316,6 @@ def run_ecos(ssp_path, stop: float | None = None, step: float | None = None, var
 
 # ------------------------------------------------------------------ ours
 def run_master(scenario, algorithm: str = "feedthrough", fmu_paths=None) -> EngineResult:
-    from .master import simulate
-
     result = simulate(scenario, algorithm=algorithm, fmu_paths=fmu_paths)
     return EngineResult("master" if algorithm == "feedthrough" else algorithm, result.time, list(result.columns),
                         result.values, result.wall_s)
@@ -344,8 +347,6 @@ def applied(result: EngineResult, name: str) -> np.ndarray:
 
 def engine_scores(result: EngineResult) -> dict:
     """ITAE, IAE from the true error e = ym - y (the plant's and reference's outputs), Ec from the applied u."""
-    from .scores import control_energy, iae, itae
-
     e = result.signal("reference.ym") - result.signal("plant.y")
     de = result.signal("reference.dym") - result.signal("plant.dy")
     u = applied(result, "controller.u")
@@ -358,8 +359,6 @@ def compare_results(reference: EngineResult, test: EngineResult, signals=COMPARE
 
     ``every`` > 1 thins both series (every n-th row) to keep pyfunnel fast on long runs.
     """
-    from .regression import compare_signal
-
     first = max(reference.time[0], test.time[0], -np.inf if from_time is None else from_time)
     last = min(reference.time[-1], test.time[-1])
     eps = 1e-9 * max(1.0, abs(last))
@@ -382,16 +381,9 @@ def max_deviation(reference: EngineResult, test: EngineResult, name: str, from_t
 
 def run_all(scenario, directory, workers: int | None = None, fmu_paths=None) -> dict:
     """Export ``scenario`` and run it in our master (feedthrough, jacobi), Ecos and fmpy's SSP simulator."""
-
-    from .ssp import export_ssp
-
     if fmu_paths is None:
-        import build_fmu
-
         fmu_paths = build_fmu.ensure_built()
     package = export_ssp(scenario, Path(directory) / f"{scenario.name}.ssp", fmu_paths=fmu_paths)
-    from .cases import parallel_map
-
     # spawned workers: Ecos's thread pool and the loaded FMUs stay out of the parent
     jobs = {"master": functools.partial(run_master, scenario, "feedthrough", fmu_paths),
             "jacobi": functools.partial(run_master, scenario, "jacobi", fmu_paths),
@@ -432,10 +424,6 @@ def side_by_side(results: dict, reference: str = "jacobi", from_time: float | No
 
 # ------------------------------------------------------------------ CLI
 def compare_command(args) -> int:
-    import tempfile
-
-    from . import scenario as scenarios
-
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
     for note in scenario.notes:
         print(f"note: {note}", file=sys.stderr)
@@ -454,8 +442,6 @@ def compare_command(args) -> int:
 
 
 def run_ssp_command(args) -> int:
-    from .scores import score
-
     result = run_package(args.engine, args.ssp, stop=args.stop, step=args.step)
     if args.out:
         result.write_csv(args.out)
@@ -478,8 +464,6 @@ def run_ssp_command(args) -> int:
 
 
 def register(commands):
-    from . import cli_args
-
     run = commands.add_parser("run-ssp", help="run an exported SSP package in fmpy's SSP simulator or in Ecos")
     run.add_argument("ssp", type=cli_args.ssp_file, help="the .ssp file (python -m harness export-ssp ...)")
     run.add_argument("--engine", choices=("ecos", "fmpy"), default="ecos")
@@ -490,7 +474,7 @@ def register(commands):
     compare = commands.add_parser("compare-engines", help="export a scenario and run it in our master (feedthrough, "
                                                           "jacobi), Ecos and fmpy's SSP simulator, side by side")
     compare.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
-    compare.add_argument("--controller", choices=("vud", "fixed", "fae"), default="vud")
+    compare.add_argument("--controller", choices=variants.NAMES, default=variants.PROPOSED)
     compare.add_argument("--stop", type=cli_args.positive_float, default=2.0, help="stop time (default 2 s)")
     compare.add_argument("--step", type=cli_args.positive_float, help="communication step (default: the scenario's)")
     compare.add_argument("--skip-steps", type=cli_args.non_negative_int, default=0,

@@ -3,7 +3,8 @@
 Each row is one scenario x controller x host x step, scored the same way for
 every host (ITAE, IAE from the true error ym - y of the plant's and the
 reference's outputs, Ec from the u the plant was given) and compared with our
-converged result (harness/step_study.py) over the same horizon.  Hosts:
+converged result (harness/studies/step_study.py) over the same horizon.  Hosts
+(one row each in ``HOSTS``, the host registry, with the function that runs it):
 
 * ``ours-feedthrough`` / ``ours-jacobi``: our master (harness/master.py), with
   consistent initial values.
@@ -12,7 +13,7 @@ converged result (harness/step_study.py) over the same horizon.  Hosts:
   initialisation, loop): Jacobi, or Gauss-Seidel in each of the six orders;
   no initial-value propagation (connected inputs keep their start values until
   the first step).
-* ``fmpy-ssp``: fmpy's SSP simulator on the exported SSP (harness/engines.py).
+* ``fmpy-ssp``: fmpy's SSP simulator on the exported SSP (harness/hosts/engines.py).
 * ``ecos``: Ecos (ecospy) on the exported SSP.
 * ``libcosim-ssp``: libcosim (libcosimpy) on the exported SSP, whose OSP
   annotation asks for 0 worker threads; ``libcosim-api``: the FMUs wired
@@ -37,6 +38,8 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import functools
+import importlib.util
 import json
 import math
 import os
@@ -45,16 +48,29 @@ import shutil
 import sys
 import tempfile
 import time as clock
+import zipfile
 from dataclasses import dataclass
 from itertools import permutations
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
+from fmpy import extract, read_model_description, simulate_fmu
+from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 
-from . import scenario as scenarios
-from .scores import control_energy, iae, itae, total_variation_rate
+import build_fmu
 
-ROOT = Path(__file__).resolve().parents[1]
+from .. import cli_args, variants
+from .. import scenario as scenarios
+from ..cases import Case, parallel_map, run_case
+from ..fmi import ModelInfo
+from ..master import Master, resolve_fmu
+from ..scores import control_energy, iae, itae, total_variation_rate
+from ..studies.step_study import CONTROLLERS, load_convergence, richardson, validated_step
+from . import engines
+from .ssp import export_ssp
+
+ROOT = Path(__file__).resolve().parents[2]
 HOSTS_MD = ROOT / "docs" / "hosts.md"
 DEFAULT_OUT = Path("results") / "hosts"  # under the working directory, like tables and regress
 METRICS = ("ITAE", "IAE", "Ec")
@@ -64,40 +80,16 @@ COMPONENT_ORDER = ("plant", "reference", "controller")  # the causal order of th
 
 @dataclass(frozen=True)
 class Host:
+    """One row of the host registry (``HOSTS``, below the functions that run the hosts)."""
+
     key: str
     name: str
     settings: str
     family: str  # "feedthrough": our master's validated step applies; "jacobi": the Jacobi one
+    run: Callable  # (scenario, fmu_paths, package) -> (Trajectory, warnings, where the warnings come from)
     package: str | None = None  # the PyPI distribution it needs beyond the project's dependencies
-
-
-def _gs_hosts() -> list:
-    hosts = []
-    for order in permutations(COMPONENT_ORDER):
-        hosts.append(Host(f"fmpy-gs-{'-'.join(order)}", "plain fmpy script (FMU2Slave)",
-                          f"Gauss-Seidel {' > '.join(order)}; no initial-value propagation", "jacobi"))
-    return hosts
-
-
-HOSTS = [
-    Host("ours-feedthrough", "our master", "feedthrough-aware; consistent initial values", "feedthrough"),
-    Host("ours-jacobi", "our master", "--algorithm jacobi; consistent initial values", "jacobi"),
-    Host("fmpy-jacobi", "plain fmpy script (FMU2Slave)", "Jacobi; no initial-value propagation", "jacobi"),
-    *_gs_hosts(),
-    Host("fmpy-ssp", "fmpy.ssp (simulate_ssp)", "exported SSP with start values of the inputs; Jacobi", "jacobi"),
-    Host("ecos", "Ecos (ecospy)", "exported SSP; Jacobi; propagates initial values", "jacobi", "ecospy"),
-    Host("libcosim-ssp", "libcosim (libcosimpy)", "exported SSP, OSP annotation numWorkerThreads=0; Jacobi",
-         "jacobi", "libcosimpy"),
-    Host("libcosim-api", "libcosim (libcosimpy)", "FMUs wired through its API, default worker threads; Jacobi",
-         "jacobi", "libcosimpy"),
-    Host("fmutool-parallel", "fmu-manipulation-toolbox container", "parallel (Jacobi); run by fmpy", "jacobi",
-         "fmu-manipulation-toolbox"),
-    Host("fmutool-seq-forward", "fmu-manipulation-toolbox container",
-         "sequential plant > reference > controller; run by fmpy", "jacobi", "fmu-manipulation-toolbox"),
-    Host("fmutool-seq-reverse", "fmu-manipulation-toolbox container",
-         "sequential controller > reference > plant; run by fmpy", "jacobi", "fmu-manipulation-toolbox"),
-]
-HOSTS_BY_KEY = {h.key: h for h in HOSTS}
+    module: str | None = None  # that distribution's import name (checked before the host runs)
+    needs_ssp: bool = False  # runs the scenario exported as an SSP package (handed to ``run`` as ``package``)
 
 
 #: hosts that do not hand the FMU's log messages to us, and what we found
@@ -111,11 +103,7 @@ NOT_CAPTURED = {
 
 def host_available(host: Host) -> str | None:
     """None if the host can run here, else the reason."""
-    import importlib.util
-
-    module = {"ecospy": "ecospy", "libcosimpy": "libcosimpy",
-              "fmu-manipulation-toolbox": "fmu_manipulation_toolbox"}.get(host.package or "")
-    if module and importlib.util.find_spec(module) is None:
+    if host.module and importlib.util.find_spec(host.module) is None:
         return f"{host.package} is not installed (pip install -e '.[hosts]')"
     return None
 
@@ -168,9 +156,6 @@ def console_warnings(lines: list) -> list:
 
 
 def _infos(scenario, fmu_paths):
-    from .fmi import ModelInfo
-    from .master import resolve_fmu
-
     paths = {name: resolve_fmu(spec.fmu, scenario, fmu_paths) for name, spec in scenario.components.items()}
     return paths, {name: ModelInfo.read(path) for name, path in paths.items()}
 
@@ -181,9 +166,7 @@ def _applied_input(scenario) -> str:
     return next(c.target for c in scenario.connections if c.source == source)
 
 
-def run_ours(scenario, algorithm: str, fmu_paths) -> tuple:
-    from .master import Master
-
+def run_ours(scenario, fmu_paths, package=None, algorithm: str = "feedthrough") -> tuple:
     master = Master(scenario, algorithm, fmu_paths)
     result = master.run()
     warnings = [f"{name}: {line}" for name, log in master.logs.items() for line in log if line.startswith("[WARNING]")]
@@ -192,12 +175,8 @@ def run_ours(scenario, algorithm: str, fmu_paths) -> tuple:
                       s(scenario.signals["u"])), warnings, "FMI logger callback"
 
 
-def run_plain_fmpy(scenario, order: tuple | None, fmu_paths) -> tuple:
+def run_plain_fmpy(scenario, fmu_paths, package=None, order: tuple | None = None) -> tuple:
     """A plain fmpy script: no initial-value propagation; Jacobi (order None) or Gauss-Seidel in ``order``."""
-    from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
-    from fmpy.fmi2 import defaultCallbacks
-
     paths, _ = _infos(scenario, fmu_paths)
     messages, slaves, folders, keep_alive = [], {}, [], []
     outputs, vrs = {}, {}
@@ -284,25 +263,20 @@ def _from_engine(result, u_column: str) -> Trajectory:
     return Trajectory(result.time, s("plant.y"), s("plant.dy"), s("reference.ym"), s("reference.dym"), s(u_column))
 
 
-def run_fmpy_ssp(package: Path, scenario) -> tuple:
-    from .engines import run_fmpy_ssp as run
-
+def run_fmpy_ssp(scenario, fmu_paths, package: Path) -> tuple:
     with captured_console() as lines:
-        result = run(package, stop=scenario.stop, step=scenario.step)
+        result = engines.run_fmpy_ssp(package, stop=scenario.stop, step=scenario.step)
     return _from_engine(result, "controller.u"), console_warnings(lines), NOT_CAPTURED["fmpy-ssp"]
 
 
-def run_ecos(package: Path, scenario) -> tuple:
-    from .engines import run_ecos as run
-
-    from .engines import ecos_temp_dir
-
-    with ecos_temp_dir(), captured_console() as lines:  # Ecos leaves its ecos_* folders in TMPDIR: its own
-        result = run(package, stop=scenario.stop, step=scenario.step, log_level="warn")
+def run_ecos(scenario, fmu_paths, package: Path) -> tuple:
+    with engines.ecos_temp_dir(), captured_console() as lines:  # Ecos leaves its ecos_* folders in TMPDIR: its own
+        result = engines.run_ecos(package, stop=scenario.stop, step=scenario.step, log_level="warn")
     return _from_engine(result, "plant.u"), console_warnings(lines), NOT_CAPTURED["ecos"]
 
 
 def _libcosim_trajectory(execution, indices: dict, infos: dict, scenario) -> Trajectory:
+    # libcosimpy here and below, not at module level: optional (the hosts and test extras)
     from libcosimpy.CosimObserver import CosimObserver
 
     observer = CosimObserver.create_last_value()
@@ -326,7 +300,7 @@ def _libcosim_logging():
     log_output_level(CosimLogLevel.WARNING)
 
 
-def run_libcosim_ssp(package: Path, scenario, fmu_paths) -> tuple:
+def run_libcosim_ssp(scenario, fmu_paths, package: Path) -> tuple:
     from libcosimpy.CosimExecution import CosimExecution
 
     _, infos = _infos(scenario, fmu_paths)
@@ -334,8 +308,6 @@ def run_libcosim_ssp(package: Path, scenario, fmu_paths) -> tuple:
         _libcosim_logging()
         folder = Path(tempfile.mkdtemp(prefix="afc_libcosim_"))
         try:
-            import zipfile
-
             with zipfile.ZipFile(package) as archive:
                 archive.extractall(folder)
             execution = CosimExecution.from_ssp_file(str(folder))
@@ -347,7 +319,7 @@ def run_libcosim_ssp(package: Path, scenario, fmu_paths) -> tuple:
     return trajectory, console_warnings(lines), "console (libcosim log level warning)"
 
 
-def run_libcosim_api(scenario, fmu_paths) -> tuple:
+def run_libcosim_api(scenario, fmu_paths, package=None) -> tuple:
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimSlave import CosimLocalSlave
 
@@ -388,9 +360,8 @@ def container_description(scenario, fmu_files: dict, order: tuple, sequential: b
             "output": [[fmu_files[i], v, f"{i}_{v}"] for i, v in exposed], "start": start}
 
 
-def run_container(scenario, fmu_paths, mode: str) -> tuple:
-    from fmpy import simulate_fmu
-    from fmu_manipulation_toolbox.assembly import Assembly
+def run_container(scenario, fmu_paths, package=None, mode: str = "parallel") -> tuple:
+    from fmu_manipulation_toolbox.assembly import Assembly  # optional (the hosts and test extras)
 
     paths, infos = _infos(scenario, fmu_paths)
     fmu_files = {name: f"{infos[name].model_identifier}.fmu" for name in scenario.components}
@@ -426,26 +397,36 @@ def run_container(scenario, fmu_paths, mode: str) -> tuple:
         "FMI logger callback of the container, which forwards the embedded FMUs' messages (fmpy)"
 
 
-def run_host(key: str, scenario, fmu_paths, package: Path | None) -> tuple:
-    if key == "ours-feedthrough":
-        return run_ours(scenario, "feedthrough", fmu_paths)
-    if key == "ours-jacobi":
-        return run_ours(scenario, "jacobi", fmu_paths)
-    if key == "fmpy-jacobi":
-        return run_plain_fmpy(scenario, None, fmu_paths)
-    if key.startswith("fmpy-gs-"):
-        return run_plain_fmpy(scenario, tuple(key[len("fmpy-gs-"):].split("-")), fmu_paths)
-    if key == "fmpy-ssp":
-        return run_fmpy_ssp(package, scenario)
-    if key == "ecos":
-        return run_ecos(package, scenario)
-    if key == "libcosim-ssp":
-        return run_libcosim_ssp(package, scenario, fmu_paths)
-    if key == "libcosim-api":
-        return run_libcosim_api(scenario, fmu_paths)
-    if key.startswith("fmutool-"):
-        return run_container(scenario, fmu_paths, key[len("fmutool-"):])
-    raise ValueError(f"unknown host {key!r}; valid: {', '.join(HOSTS_BY_KEY)}")
+# ------------------------------------------------------- the host registry
+#: one row per host: a new host is its run function above and its row here
+HOSTS = [
+    Host("ours-feedthrough", "our master", "feedthrough-aware; consistent initial values", "feedthrough",
+         functools.partial(run_ours, algorithm="feedthrough")),
+    Host("ours-jacobi", "our master", "--algorithm jacobi; consistent initial values", "jacobi",
+         functools.partial(run_ours, algorithm="jacobi")),
+    Host("fmpy-jacobi", "plain fmpy script (FMU2Slave)", "Jacobi; no initial-value propagation", "jacobi",
+         run_plain_fmpy),
+    *(Host(f"fmpy-gs-{'-'.join(order)}", "plain fmpy script (FMU2Slave)",
+           f"Gauss-Seidel {' > '.join(order)}; no initial-value propagation", "jacobi",
+           functools.partial(run_plain_fmpy, order=order)) for order in permutations(COMPONENT_ORDER)),
+    Host("fmpy-ssp", "fmpy.ssp (simulate_ssp)", "exported SSP with start values of the inputs; Jacobi", "jacobi",
+         run_fmpy_ssp, needs_ssp=True),
+    Host("ecos", "Ecos (ecospy)", "exported SSP; Jacobi; propagates initial values", "jacobi", run_ecos,
+         "ecospy", "ecospy", needs_ssp=True),
+    Host("libcosim-ssp", "libcosim (libcosimpy)", "exported SSP, OSP annotation numWorkerThreads=0; Jacobi",
+         "jacobi", run_libcosim_ssp, "libcosimpy", "libcosimpy", needs_ssp=True),
+    Host("libcosim-api", "libcosim (libcosimpy)", "FMUs wired through its API, default worker threads; Jacobi",
+         "jacobi", run_libcosim_api, "libcosimpy", "libcosimpy"),
+    Host("fmutool-parallel", "fmu-manipulation-toolbox container", "parallel (Jacobi); run by fmpy", "jacobi",
+         functools.partial(run_container, mode="parallel"), "fmu-manipulation-toolbox", "fmu_manipulation_toolbox"),
+    Host("fmutool-seq-forward", "fmu-manipulation-toolbox container",
+         "sequential plant > reference > controller; run by fmpy", "jacobi",
+         functools.partial(run_container, mode="seq-forward"), "fmu-manipulation-toolbox", "fmu_manipulation_toolbox"),
+    Host("fmutool-seq-reverse", "fmu-manipulation-toolbox container",
+         "sequential controller > reference > plant; run by fmpy", "jacobi",
+         functools.partial(run_container, mode="seq-reverse"), "fmu-manipulation-toolbox", "fmu_manipulation_toolbox"),
+]
+HOSTS_BY_KEY = {h.key: h for h in HOSTS}
 
 
 def host_row(task: tuple) -> dict:
@@ -456,7 +437,7 @@ def host_row(task: tuple) -> dict:
            "step_kind": step_kind, "converged": converged}
     began = clock.perf_counter()
     try:
-        trajectory, warnings, where = run_host(key, scenario, fmu_paths, package)
+        trajectory, warnings, where = HOSTS_BY_KEY[key].run(scenario, fmu_paths, package)
         scores = trajectory.scores()
         finite = all(math.isfinite(v) for v in scores.values())
         row.update(status="ok" if finite else "diverged", **scores, warnings=warnings, warnings_from=where,
@@ -476,9 +457,6 @@ def converged_values(name: str, controller: str, stop: float | None, fmu_paths, 
     entry = convergence.get("scenarios", {}).get(name, {}).get("controllers", {}).get(controller, {})
     if (stop is None or stop >= scenario.stop) and entry.get("converged") and not convergence.get("stop"):
         return {m: entry["converged"][m] for m in METRICS}
-    from .cases import Case, run_case
-    from .step_study import richardson
-
     fine = entry.get("levels", [scenario.step])[-1] if entry else scenario.step / 4
     coarse, finer = (run_case(Case(name, controller, step=h, stop=stop), fmu_paths) for h in (fine, fine / 2))
     if coarse["status"] != "ok" or finer["status"] != "ok":
@@ -488,8 +466,6 @@ def converged_values(name: str, controller: str, stop: float | None, fmu_paths, 
 
 def plan(names, controllers, host_keys, step_kinds, convergence) -> list:
     """(host, scenario, controller, step, step kind) of every row."""
-    from .step_study import validated_step
-
     rows = []
     for name in names:
         scenario_step = scenarios.load(name).step
@@ -511,16 +487,10 @@ def plan(names, controllers, host_keys, step_kinds, convergence) -> list:
     return rows
 
 
-def hosts_matrix(names, controllers=("vud",), host_keys=None, step_kinds=("validated", "scenario"),
+def hosts_matrix(names, controllers=(variants.PROPOSED,), host_keys=None, step_kinds=("validated", "scenario"),
                  stop=None, jobs: int | None = None, convergence: dict | None = None) -> dict:
     """The rows of the matrix; ``stop``: one horizon for every scenario, or {scenario: horizon} (None: 20 s)."""
     stops = stop if isinstance(stop, dict) else {name: stop for name in names}
-    import build_fmu
-
-    from .cases import parallel_map
-    from .ssp import export_ssp
-    from .step_study import load_convergence
-
     convergence = load_convergence() if convergence is None else convergence
     folder = Path(tempfile.mkdtemp(prefix="afc_hosts_"))  # SSP packages and a private copy of the FMUs
     fmu_paths = {name: Path(shutil.copy(path, folder / path.name)) for name, path in build_fmu.ensure_built().items()}
@@ -539,7 +509,7 @@ def hosts_matrix(names, controllers=("vud",), host_keys=None, step_kinds=("valid
         tasks = []
         for key, name, controller, step, kind in planned:
             package = None
-            if key in ("fmpy-ssp", "ecos", "libcosim-ssp"):
+            if HOSTS_BY_KEY[key].needs_ssp:
                 package = folder / f"{name}_{controller}_{step:g}.ssp"
                 if not package.exists():
                     export_ssp(scenarios.configure(name, controller, step, stops.get(name)), package,
@@ -594,8 +564,6 @@ USER_NOTES = """## What a user of another FMI tool must know
 
 def steps_for_hosts(convergence: dict) -> list:
     """The validated steps a user of another host needs, per scenario (smallest over the three controllers)."""
-    from .step_study import CONTROLLERS, validated_step
-
     lines = ["## The step to use", "",
              "The validated step (1 %) of docs/convergence.md, smallest over the three controllers. A host "
              "that delays every connection one step (Jacobi: Ecos, libcosim, fmpy.ssp, fmu-manipulation-toolbox "
@@ -612,15 +580,13 @@ def steps_for_hosts(convergence: dict) -> list:
 
 
 def matrix_markdown(matrix: dict) -> str:
-    from .step_study import validated_step, load_convergence
-
     convergence = load_convergence()
     horizon = ", ".join(f"{name} {stop:g} s" if stop else f"{name} 20 s" for name, stop in matrix["stops"].items())
     lines = ["# The FMUs in other FMI hosts", "",
              f"Generated by `python -m harness hosts --apply` ({matrix['wall_s']:.0f} s wall on 2 cores; horizon "
              f"{horizon}). Each row runs the closed loop (controller `vud` unless said) in one host at one "
              "communication step and compares ITAE, IAE and Ec with our converged result over the same horizon "
-             "(harness/step_study.py; within 1 % = **ok**; results/hosts/hosts.json keeps every warning's text). "
+             "(harness/studies/step_study.py; within 1 % = **ok**; results/hosts/hosts.json keeps every warning's text). "
              "*validated* is the validated step (1 %) of "
              "docs/convergence.md for the host's scheme (our feedthrough master, or Jacobi for every other host); "
              "*scenario* is the scenario's own step (Table I/II). Warnings are the FMU's log messages with status "
@@ -666,8 +632,6 @@ def matrix_markdown(matrix: dict) -> str:
 
 
 def hosts_command(args) -> int:
-    from . import cli_args
-
     cli_args.refuse_tracked([Path(args.out) / "hosts.json", Path(args.out) / "hosts.md"])
     names = args.scenarios or ["pendulum_case1", "manipulator"]
     for name in names:
@@ -719,10 +683,8 @@ def hosts_command(args) -> int:
 def register(commands):
     command = commands.add_parser("hosts", help="run the closed loops in every FMI host installed here and compare "
                                                 "with our converged result")
-    from . import cli_args
-
     command.add_argument("scenarios", nargs="*", type=cli_args.scenario, help="default: pendulum_case1 manipulator")
-    command.add_argument("--controller", nargs="+", choices=tuple(scenarios.CONTROLLER_VARIANTS), default=["vud"])
+    command.add_argument("--controller", nargs="+", choices=variants.NAMES, default=[variants.PROPOSED])
     command.add_argument("--host", nargs="+", help=f"hosts to run (default all): {', '.join(HOSTS_BY_KEY)}")
     command.add_argument("--steps", nargs="+", choices=("validated", "scenario"), default=["validated", "scenario"],
                          help="which steps: the host scheme's validated step, the scenario's step (default both)")

@@ -1,4 +1,5 @@
-"""The paper's claims (SPEC section 7), each decided only where the numbers can carry it.
+"""The paper's claims on the scores of docs/model.md section 9 (scores), each decided only where the
+numbers can carry it.
 
 Every score comes from a step ladder: the same co-simulation at the communication
 step h and at h/2 (and finer where a comparison needs it).  A score's value is
@@ -27,12 +28,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from .. import variants
+
 REPRODUCED = "reproduced"
 NOT_REPRODUCED = "not reproduced"
 UNDECIDED = "not decided at this accuracy"
 VERDICTS = (REPRODUCED, NOT_REPRODUCED, UNDECIDED)
 
-CONTROLLERS = ("vud", "fixed", "fae")
+CONTROLLERS = variants.NAMES  # vud, fixed, fae
+PROPOSED = variants.PROPOSED  # vud: each claim compares it with every other variant
 PENDULUM = ("pendulum_case1", "pendulum_case2", "pendulum_case3")
 ALL_SCENARIOS = (*PENDULUM, "manipulator")
 DISTURBANCE_TOLERANCE = 0.10  # "barely changes": ITAE and IAE within 10 % of case 1
@@ -124,25 +128,25 @@ def _comparisons(name: str, metric: str, ladders: dict, factor: float = 1.0):
     missing = [c for c, e in estimates.items() if e is None]
     if missing:
         return UNDECIDED, f"{name}: no {metric} for {', '.join(missing)} (run failed)", set()
-    vud = estimates["vud"]
+    vud = estimates[PROPOSED]
     outcomes, parts, open_cases = [], [], set()
-    for other in ("fixed", "fae"):
+    for other in variants.COMPARISONS:
         limit = estimates[other].scaled(factor)
         outcome, gap, combined = compare(vud, limit)
         outcomes.append(outcome)
         relation = {BELOW: "clearly below", ABOVE: "clearly above", OPEN: "undecided"}[outcome]
         scaled = f"{factor:g} x " if factor != 1.0 else ""
-        parts.append(f"{scaled}{other} {limit.text()} (h = {estimates[other].step:g} s; vud {relation}: "
+        parts.append(f"{scaled}{other} {limit.text()} (h = {estimates[other].step:g} s; {PROPOSED} {relation}: "
                      f"gap {abs(gap):.3g} {'>' if outcome != OPEN else '<='} error {combined:.3g})")
         if outcome == OPEN:
-            open_cases |= {(name, "vud"), (name, other)}
+            open_cases |= {(name, PROPOSED), (name, other)}
     if all(o == BELOW for o in outcomes):
         verdict = REPRODUCED
     elif any(o == ABOVE for o in outcomes):
         verdict = NOT_REPRODUCED
     else:
         verdict = UNDECIDED
-    line = f"{name}: vud {vud.text()} (h = {vud.step:g} s) vs " + ", ".join(parts) + f": {verdict}"
+    line = f"{name}: {PROPOSED} {vud.text()} (h = {vud.step:g} s) vs " + ", ".join(parts) + f": {verdict}"
     return verdict, line, open_cases
 
 
@@ -175,13 +179,13 @@ def disturbance_claim(ladders: dict) -> Claim:
             two = estimate(ladders.get(("pendulum_case2", controller), []), metric)
             if one is None or two is None or one.value == 0.0:
                 changes.append(f"{metric} n/a (run failed)")
-                if controller == "vud":
+                if controller == PROPOSED:
                     verdicts.append(UNDECIDED)
                 continue
             change, error = relative_change(two, one)
             changes.append(f"{metric} {100 * change:+.3g} % ± {100 * error:.2g} % "
                            f"({two.text()} vs {one.text()})")
-            if controller != "vud":
+            if controller != PROPOSED:
                 continue
             if abs(change) + error < DISTURBANCE_TOLERANCE:
                 verdicts.append(REPRODUCED)
@@ -189,7 +193,7 @@ def disturbance_claim(ladders: dict) -> Claim:
                 verdicts.append(NOT_REPRODUCED)
             else:
                 verdicts.append(UNDECIDED)
-                open_cases |= {("pendulum_case1", "vud"), ("pendulum_case2", "vud")}
+                open_cases |= {("pendulum_case1", PROPOSED), ("pendulum_case2", PROPOSED)}
         details.append(f"{controller}: case 2 vs case 1: {', '.join(changes)}")
     verdict = combine(verdicts)
     return Claim(label, verdict, details, open_cases if verdict == UNDECIDED else set())

@@ -23,15 +23,25 @@ from __future__ import annotations
 import functools
 import json
 import math
+import subprocess
+import sys
 import tempfile
 import time as clock
 from pathlib import Path
 
-from . import scenario as scenarios
-from .cases import default_jobs
-from .fmi import Component, ModelInfo
-from .master import Master, resolve_fmu
-from .oracle import simulate_oracle
+import build_fmu
+import build_native
+import c_toolchain
+import fmu_catalog
+
+from .. import cli_args, master_loop, variants
+from .. import scenario as scenarios
+from ..cases import default_jobs
+from ..fmi import Component, ModelInfo
+from ..master import Master, resolve_fmu
+from ..studies.oracle import simulate_oracle
+from . import engines, ssp
+from .libcosim import run_libcosim, with_algorithm
 
 NULL_FMUS = {  # instance -> (model identifier, the FMU whose variables it copies)
     "plant": ("NullPendulum", "InvertedPendulum"),
@@ -58,11 +68,9 @@ class {identifier}(Fmi2Slave):
 
 def build_null_fmus(folder: Path) -> dict:
     """The floor's FMUs, written from one template into ``folder`` and built there."""
-    import build_fmu
-
     paths = {}
     for instance, (identifier, shape) in NULL_FMUS.items():
-        source = next(f for f in build_fmu.FMUS if f.model_identifier == shape)
+        source = fmu_catalog.fmu(shape)
         script = folder / f"null_{identifier.lower()}_fmu.py"  # a unique module name per FMU
         script.write_text(NULL_SCRIPT.format(shape=shape, module=source.script.stem, identifier=identifier))
         paths[instance] = build_fmu.build_script(script, folder / f"{identifier}.fmu",
@@ -138,14 +146,12 @@ LIBCOSIM_OBSERVERS = ("none", "scored", "recorded", "every")
 
 
 def libcosim_us_per_step(package_dir: Path, scenario, observer: str = "none") -> float:
-    """libcosim's own stepping loop on a package made by libcosim_engine.with_algorithm.
+    """libcosim's own stepping loop on a package made by harness/hosts/libcosim.py's with_algorithm.
 
     ``observer``: "none" (libcosim reads only the connected outputs), "scored" (a time-series
     observer of the signals the scores read: e, de, ym, dym, u), "recorded" (of every signal our
     master records), "every" (a last-value observer, which reads every variable at every step).
     """
-    from .libcosim_engine import run_libcosim
-
     if observer not in LIBCOSIM_OBSERVERS:
         raise ValueError(f"observer {observer!r}; valid: {', '.join(LIBCOSIM_OBSERVERS)}")
     record = {"scored": tuple(scenario.signals.values()), "recorded": scenario.record}.get(observer, ())
@@ -158,9 +164,7 @@ def libcosim_us_per_step(package_dir: Path, scenario, observer: str = "none") ->
 
 def native_paths() -> dict | None:
     """{model identifier: native FMI 2.0 FMU}, or None when zig's compiler is not installed."""
-    import build_native
-
-    if not build_native.compiler_available():
+    if not c_toolchain.compiler_available():
         return None
     return {name: paths[2] for name, paths in build_native.ensure_built().items()}
 
@@ -189,15 +193,11 @@ def oracle_disagreement(runs: dict) -> float | None:
 
 def fmpy_ssp_us_per_step(package: Path, scenario) -> float:
     """fmpy's SSP simulator, whole run (it gives no handle on its loop alone)."""
-    from . import engines
-
     return 1e6 * engines.run_fmpy_ssp(package, stop=scenario.stop, step=scenario.step).wall_s / scenario.steps
 
 
 def ecos_us_per_step(package: Path, scenario) -> tuple[float, float]:
     """Ecos: (its own stepping loop alone, whole run) in microseconds per step."""
-    from . import engines
-
     ecospy = engines.import_ecospy()
     ecospy.EcosLib.set_log_level("warn")
     started = clock.perf_counter()
@@ -242,18 +242,14 @@ def _best_of(figures: dict, notes: dict, measurements: dict, repeat: int):
             figures[f"{key}_us"] = min(values)
 
 
-def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None, repeat=3) -> dict:
+def bench(scenario_name="pendulum_case1", controller=variants.PROPOSED, stop=2.0, step=None, repeat=3) -> dict:
     """Every figure is the best (smallest) of ``repeat`` interleaved measurements.
 
     ``*_us`` is the stepping loop alone where it can be separated (ours, Ecos, the floor, the
     oracle); ``*_whole_us`` includes instantiation and initialisation, as fmpy's SSP simulator
     is measured (it offers no handle on its loop).
     """
-    from . import ssp
-
     scenario = scenarios.configure(scenario_name, controller, step, stop)
-    from . import master_loop
-
     figures = {"scenario": scenario.name, "controller": controller, "step": scenario.step, "stop": scenario.stop,
                "steps": scenario.steps, "repeat": repeat,
                "master_loop": "compiled" if master_loop.library() else "python"}
@@ -261,8 +257,6 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
     runs = {}
     with tempfile.TemporaryDirectory(prefix="afc_bench_") as folder:
         folder = Path(folder)
-        import build_fmu
-
         python_paths = build_fmu.ensure_built(edition="python")
         package = ssp.export_ssp(scenario, folder / f"{scenario.name}.ssp", fmu_paths=python_paths)
         null_paths = build_null_fmus(folder)
@@ -270,7 +264,6 @@ def bench(scenario_name="pendulum_case1", controller="vud", stop=2.0, step=None,
         per_fmu = {f"fmu_{name}{kind}": functools.partial(fmu_us_per_step, scenario, name, paths[name])
                    for name in NULL_FMUS for kind, paths in (("", real_paths), ("_null", null_paths))}
         native = native_paths()
-        from .libcosim_engine import with_algorithm
         libcosim_python = with_algorithm(package, folder / "libcosim_python", scenario.step, workers=0)
         measurements = {}
         if native is None:
@@ -318,9 +311,6 @@ TABLES_TARGET_S = {"native": 10.0}  # issue 16: `tables --edition native` on 2 c
 def tables_wall_seconds(edition: str, stop: float | None = None) -> float:
     """Wall time of ``python -m harness tables --edition EDITION`` (a process of its own, output
     to a temporary folder), as a user runs it: the main job's figure, in the benchmark."""
-    import subprocess
-    import sys
-
     with tempfile.TemporaryDirectory(prefix="afc_bench_tables_") as folder:
         command = [sys.executable, "-m", "harness", "tables", "--edition", edition, "--out", folder]
         if stop is not None:
@@ -407,11 +397,9 @@ def bench_command(args) -> int:
 
 
 def register(commands):
-    from . import cli_args
-
     parser = commands.add_parser("bench", help="cost per step: ours vs fmpy SSP, Ecos, the FMI floor, the oracle")
     parser.add_argument("--scenario", default="pendulum_case1", type=cli_args.scenario, help=cli_args.scenario_help())
-    parser.add_argument("--controller", default="vud", choices=tuple(scenarios.CONTROLLER_VARIANTS))
+    parser.add_argument("--controller", default=variants.PROPOSED, choices=variants.NAMES)
     parser.add_argument("--stop", type=cli_args.positive_float, default=2.0, help="simulated seconds per measurement")
     parser.add_argument("--step", type=cli_args.positive_float, help="communication step (default: the scenario's)")
     parser.add_argument("--repeat", type=cli_args.positive_int, default=3, help="measurements per figure; the best counts")

@@ -1,7 +1,7 @@
 """The resumable CSV of a sweep: one row per point, streamed and flushed as points finish.
 
-``DIR/sweep.csv`` holds the controller, the grid values, every score of SPEC
-section 7, the wall time of the point, its status and the reason; a row cut short
+``DIR/sweep.csv`` holds the controller, the grid values, every score of docs/model.md
+section 9 (scores), the wall time of the point, its status and the reason; a row cut short
 by a kill is dropped on resume.  ``DIR/sweep.json`` holds the settings of the sweep
 so that a resume with other settings is refused rather than mixed in.
 """
@@ -14,9 +14,10 @@ import math
 import os
 from pathlib import Path
 
-from .cases import STATUSES
-from .scenario import CONTROLLER_VARIANTS, ScenarioError
-from .scores import SCORE_KEYS
+from ..cases import STATUSES
+from ..scenario import ScenarioError
+from ..scores import SCORE_KEYS
+from ..variants import CONTROLLER_VARIANTS
 
 CSV_NAME = "sweep.csv"
 SETTINGS_NAME = "sweep.json"

@@ -15,48 +15,25 @@ import math
 
 import numpy as np
 
+import fmu_catalog
 from fmu_src import afc_math
-from plants import inverted_pendulum_model, manipulator_model, plant_integration
+from plants import plant_integration
+from plants import registry as plant_registry
 
-from .scenario import Scenario
+from ..scenario import Scenario
 
 
 def _parameters(scenario: Scenario, instance: str) -> dict:
-    import build_fmu
-
     spec = scenario.components[instance]
-    defaults = {v.name: v.start for v in build_fmu.model_class(spec.fmu).VARIABLES if v.causality == "parameter"}
+    defaults = {v.name: v.start for v in fmu_catalog.model_class(spec.fmu).VARIABLES if v.causality == "parameter"}
     return {**defaults, **spec.parameters}
-
-
-def _plant(scenario: Scenario):
-    """(derivative, params, extra outputs function, plant parameters) of the scenario's plant."""
-    spec = scenario.components["plant"]
-    p = _parameters(scenario, "plant")
-    if spec.fmu == "InvertedPendulum":
-        params = inverted_pendulum_model.pendulum_params(p["gv"], p["mc"], p["mp"], p["lp"], p["dist_gain"])
-
-        def extra(t, x1, x2):
-            return {"plant.d": inverted_pendulum_model.pendulum_disturbance(t, p["dist_gain"])}
-
-        return inverted_pendulum_model.pendulum_derivative, params, extra, p
-    if spec.fmu == "Manipulator":
-        params = manipulator_model.manipulator_params(p["gv"], p["lr"], p["dr"], p["cr"], p["vr"],
-                                                      p["mr0"], p["mr1"])
-
-        def extra(t, x1, x2):
-            mr = manipulator_model.manipulator_payload(t, p["mr0"], p["mr1"])
-            inertia = manipulator_model.manipulator_inertia(mr, p["lr"])
-            return {"plant.d": manipulator_model.manipulator_friction(x2, inertia, p["cr"], p["vr"]),
-                    "plant.mr": mr}
-
-        return manipulator_model.manipulator_derivative, params, extra, p
-    raise ValueError(f"the oracle knows InvertedPendulum and Manipulator, not {spec.fmu!r}")
 
 
 def simulate_oracle(scenario: Scenario, algorithm: str = "feedthrough") -> dict:
     """{"time": t, "instance.variable": array, ...} of the closed loop (no FMI)."""
-    derivative, plant_params, plant_extra, plant = _plant(scenario)
+    plant = _parameters(scenario, "plant")
+    model = plant_registry.oracle_model(scenario.components["plant"].fmu, plant)  # plants/registry.py
+    derivative, plant_params, plant_extra = model.derivative, model.params, model.extra
     reference = _parameters(scenario, "reference")
     controller = _parameters(scenario, "controller")
     amplitude, omega = reference["amplitude"], reference["omega"]
@@ -100,7 +77,7 @@ def simulate_oracle(scenario: Scenario, algorithm: str = "feedthrough") -> dict:
             ym, dym, e, de = reference_outputs(t, x1, x2)
             u, modified, alpha, _ = afc_math.controller_output((e, de), (ym, dym), t, theta, w_hat, p)
         diagnostics = (*modified, *alpha)
-        table[n] = (x1, x2, ym, dym, e, de, u, *diagnostics, *theta, w_hat if variant == 3 else 0.0,
+        table[n] = (x1, x2, ym, dym, e, de, u, *diagnostics, *theta, w_hat if variant == afc_math.VARIANT_FAE else 0.0,
                     *plant_extra(t, x1, x2).values())
         if n == steps:
             break

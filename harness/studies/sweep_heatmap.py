@@ -4,6 +4,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
+from ..units import score_units, variable_unit, with_unit
 from .sweep_grid import SCENARIO_SETTINGS, SweepPlan, value_key
 
 
@@ -14,8 +17,6 @@ def heatmap_arrays(plan: SweepPlan, rows: list, controller: str):
     failed (and its metric NaN) if any point folded into it is; otherwise
     its metric is the largest (all the scores are "lower is better").
     """
-    import numpy as np
-
     grids = plan.grids
     nx = len(grids[0])
     ny = len(grids[1]) if len(grids) > 1 else 1
@@ -38,14 +39,11 @@ def heatmap_arrays(plan: SweepPlan, rows: list, controller: str):
 
 
 def plot_heatmap(plan: SweepPlan, rows: list, path) -> Path:
-    import matplotlib
+    import matplotlib  # here, not at module level: 1-3 s of import, paid only when a heat map is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
     from matplotlib.colors import LogNorm, Normalize
-
-    from .units import score_units, variable_unit, with_unit
 
     def axis_label(name: str) -> str:  # step and stop in s, a parameter in its FMU's unit
         return with_unit(name, "s" if name in SCENARIO_SETTINGS else variable_unit(plan.scenario, name))

@@ -6,7 +6,7 @@ one co-simulation per point, on a local process pool (default: every core)
 or on an existing ``dask.distributed`` scheduler (``--scheduler ADDRESS``).
 
 Rows stream to ``DIR/sweep.csv`` as points finish: the controller, the grid
-values, every score of SPEC section 7, the wall time of the point, its status
+values, every score of docs/model.md section 9 (scores), the wall time of the point, its status
 (``ok``, ``diverged``, ``failed``) and the reason.  Run the same command again
 after an interruption: points already in the CSV (same controller and grid
 values) are skipped.  ``DIR/sweep.json`` holds the settings of the sweep
@@ -28,21 +28,25 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import signal
 import sys
 import time as clock
 from dataclasses import dataclass
 from pathlib import Path
 
-from .cases import STATUSES, one_line
-from .scenario import CONTROLLER_VARIANTS, ScenarioError
-from .scores import SCORE_KEYS
+import build_fmu
+
+from .. import cli_args, variants
+from ..cases import STATUSES, one_line
+from ..scenario import ScenarioError
+from ..scores import SCORE_KEYS
 from .sweep_csv import CSV_NAME, SETTINGS_NAME, CsvSink, check_settings, read_rows
 from .sweep_executors import DaskPool, LocalPool, point_task
 from .sweep_grid import SCENARIO_SETTINGS, SweepPlan, parse_grid, plan_sweep, point_key
 from .sweep_heatmap import plot_heatmap
 
-DOCS_DIR = Path(__file__).resolve().parents[1] / "docs"  # where --apply copies a sweep's CSV and heat map
+DOCS_DIR = Path(__file__).resolve().parents[2] / "docs"  # where --apply copies a sweep's CSV and heat map
 
 
 # ------------------------------------------------------------------- sweep
@@ -86,7 +90,7 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
     sink = CsvSink(csv_path, plan.names, kept)
     wall_start = clock.perf_counter()
     interrupted, computed, pool, lost, lost_reason = False, 0, None, 0, ""
-    from tqdm import tqdm
+    from tqdm import tqdm  # here, not at module level: 0.1-0.3 s of import that a CLI start without a sweep skips
 
     if todo:
         try:
@@ -158,16 +162,12 @@ def current_rows(plan: SweepPlan, rows: list) -> list:
 # --------------------------------------------------------------------- CLI
 def sweep_command(args) -> int:
     grids = [parse_grid(text) for text in args.grid]
-    controllers = tuple(CONTROLLER_VARIANTS) if args.controller == "all" else (args.controller,)
-    import build_fmu
-
+    controllers = variants.NAMES if args.controller == "all" else (args.controller,)
     plan = plan_sweep(args.scenario, controllers, grids, metric=args.metric, stop=args.stop, step=args.step,
                       algorithm=args.algorithm, fmu_paths=build_fmu.ensure_built())
     out = Path(args.out) if args.out else Path("build") / "sweeps" / plan.scenario.name
     if args.jobs is not None and args.jobs < 1:
         raise ScenarioError(f"--jobs {args.jobs}: need at least 1")
-    from . import cli_args
-
     cli_args.refuse_tracked([out / CSV_NAME, out / SETTINGS_NAME, out / f"heatmap_{plan.metric}.png"])
     parameters = [g for g in plan.grids if "." in g.name]
     for pick in (min, max):  # valid ranges are intervals: the ends of each axis decide
@@ -216,8 +216,6 @@ def plan_fmu_paths(plan: SweepPlan) -> dict:
 
 def apply_to_docs(plan: SweepPlan, summary: SweepSummary) -> list:
     """Copy the sweep's CSV and heat map into docs/ as docs/sweep_SCENARIO_AXES.csv and ..._METRIC.png."""
-    import shutil
-
     axes = "_".join(name.rpartition(".")[2].split("_")[0] for name in plan.names)  # plant.dist_gain -> dist
     stem = DOCS_DIR / f"sweep_{plan.scenario.name}_{axes}"
     written = [shutil.copyfile(summary.csv_path, stem.with_name(stem.name + ".csv"))]
@@ -227,14 +225,12 @@ def apply_to_docs(plan: SweepPlan, summary: SweepSummary) -> list:
 
 
 def register(commands):
-    from . import cli_args
-
     sweep = commands.add_parser(
         "sweep", help="run a scenario over a grid of parameters (process pool or Dask) and draw heat maps",
         description="One co-simulation per point of the cartesian product of the grids, for each controller. "
                     "Rows stream to OUT/sweep.csv; rerun the same command to resume an interrupted sweep.")
     sweep.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
-    sweep.add_argument("--controller", choices=(*CONTROLLER_VARIANTS, "all"), default="vud")
+    sweep.add_argument("--controller", choices=(*variants.NAMES, "all"), default=variants.PROPOSED)
     sweep.add_argument("--grid", action="append", required=True, metavar="NAME=START:STOP:N",
                        help="a grid axis: instance.parameter (e.g. plant.mp, controller.kappa1), step or stop; "
                             "N evenly spaced values from START to STOP, START:STOP:N:log for geometric spacing, "

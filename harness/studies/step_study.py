@@ -54,14 +54,19 @@ import tempfile
 import time as clock
 from pathlib import Path
 
-from . import scenario as scenarios
-from .cases import default_jobs, parallel_map
+import build_fmu
 
-ROOT = Path(__file__).resolve().parents[1]
+from .. import cli_args, variants
+from .. import scenario as scenarios
+from ..cases import default_jobs, parallel_map
+from ..master import Divergence, SimulationFailed, simulate
+from ..scores import score
+
+ROOT = Path(__file__).resolve().parents[2]
 CONVERGENCE_JSON = scenarios.SCENARIO_DIR / "convergence.json"
 CONVERGENCE_MD = ROOT / "docs" / "convergence.md"
 DEFAULT_OUT = Path("results") / "step_study"  # under the working directory, like tables and regress
-CONTROLLERS = tuple(scenarios.CONTROLLER_VARIANTS)  # vud, fixed, fae
+CONTROLLERS = variants.NAMES  # vud, fixed, fae
 ALGORITHMS = ("feedthrough", "jacobi")
 ALL_SCENARIOS = ("pendulum_case1", "pendulum_case2", "pendulum_case3", "manipulator")
 METRICS = ("ITAE", "IAE", "Ec")
@@ -202,9 +207,6 @@ def true_error_signals(scenario) -> tuple:
 def run_scored(name: str, controller: str, step: float, stop: float | None, algorithm: str,
                fmu_paths: dict | None) -> dict:
     """One run scored on the true tracking error ym - y (see true_error_signals); failures are rows."""
-    from .master import Divergence, SimulationFailed, simulate
-    from .scores import score
-
     scenario = scenarios.configure(name, controller, step, stop)
     outcome = {"step": scenario.step, "algorithm": algorithm}
     try:
@@ -299,8 +301,6 @@ def _study_task(arguments: tuple) -> tuple:
 def study(names: list, jobs: int, stop: float | None = None, start_step: float | None = None,
           finest_factor: float = 16.0, limit: float = 0.05, controllers=CONTROLLERS, reuse: dict | None = None) -> dict:
     """The whole study: one task per scenario x controller, longest first, on ``jobs`` processes."""
-    import build_fmu
-
     # a private copy of the FMUs: a rebuild during the study (minutes to an hour) must not pull them away
     snapshot = Path(tempfile.mkdtemp(prefix="afc_step_study_"))
     fmu_paths = {name: Path(shutil.copy(path, snapshot / path.name)) for name, path in build_fmu.ensure_built().items()}
@@ -388,7 +388,7 @@ def convergence_markdown(convergence: dict) -> str:
              "step of its three controllers. Every run is scored on the true tracking error ym - y (the "
              "plant's and the reference's outputs at the same time; under Jacobi the reference's own e pairs "
              "ym(t) with y one step older). How the converged values are computed and how precise the "
-             "search is: `harness/step_study.py` (the true limit lies below the next rung of the ladder, "
+             "search is: `harness/studies/step_study.py` (the true limit lies below the next rung of the ladder, "
              "at most 1.28x higher).", "",
              convergence_summary(convergence), ""]
     for name, entry in convergence.get("scenarios", {}).items():
@@ -425,15 +425,13 @@ def apply_step(name: str, step: float):
 
 
 def convergence_command(args) -> int:
-    from . import cli_args
-
     cli_args.refuse_tracked([Path(args.out) / "convergence.json", Path(args.out) / "convergence.md"])
     names = args.scenarios or list(ALL_SCENARIOS)
     for name in names:
         scenarios.load(name)  # clear error for an unknown name
     jobs = args.jobs or default_jobs()
     stop = args.stop if args.stop is not None else (2.0 if args.quick else None)
-    controllers = ("vud",) if args.quick else CONTROLLERS
+    controllers = (variants.PROPOSED,) if args.quick else CONTROLLERS
     if args.from_json:  # rewrite the outputs (and --apply them) from a study already run
         convergence = json.loads(Path(args.from_json).read_text())
         stop = convergence.get("stop")
@@ -478,8 +476,6 @@ def convergence_command(args) -> int:
 
 
 def register(commands):
-    from . import cli_args
-
     command = commands.add_parser("convergence", help="step study by accuracy: validated step (1 %%) per scenario x "
                                                       "controller x algorithm")
     command.add_argument("scenarios", nargs="*", type=cli_args.scenario, help=f"default: {', '.join(ALL_SCENARIOS)}")

@@ -44,7 +44,7 @@ def with_algorithm(ssp_path, out_dir, step: float, workers: int = 0) -> Path:
                   "      </ssc:Annotation>\n")
     marker = "    </ssd:Annotations>\n  </ssd:DefaultExperiment>"
     if marker not in text:
-        raise ValueError(f"{ssd}: no DefaultExperiment annotations to extend (not exported by harness/ssp.py?)")
+        raise ValueError(f"{ssd}: no DefaultExperiment annotations to extend (not exported by harness/hosts/ssp.py?)")
     ssd.write_text(text.replace(marker, annotation + marker, 1), encoding="utf-8")
     return out_dir
 
@@ -57,7 +57,8 @@ def run_libcosim(package_dir, stop: float, step: float, variables=(), record=())
     uses a last-value observer, which makes libcosim read every variable of every FMU at every step
     (on the pendulum loop with native FMUs: 2.3 us per step instead of 1.1 with no observer).
     """
-    try:
+    try:  # optional (the hosts and test extras): imported here, where a missing package is one clear error
+        from libcosimpy.CosimEnums import CosimVariableType
         from libcosimpy.CosimExecution import CosimExecution
         from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
         from libcosimpy.CosimObserver import CosimObserver
@@ -70,8 +71,6 @@ def run_libcosim(package_dir, stop: float, step: float, variables=(), record=())
         observer = CosimObserver.create_last_value()
         execution.add_observer(observer)
     if record:
-        from libcosimpy.CosimEnums import CosimVariableType
-
         series = CosimObserver.create_time_series(buffer_size=steps + 1)
         execution.add_observer(series)
         observed = []

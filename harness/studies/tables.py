@@ -4,26 +4,31 @@
 (4 scenarios x vud, fixed, fae) in parallel processes and writes table1.csv,
 table2.csv, report.md and figures like the paper's Figs. 4-8 to DIR.  It also
 runs each case at half its step (and, with ``--refine``, the cases an open claim
-needs finer still): harness/claims.py decides the paper's claims on those ladders.
+needs finer still): harness/studies/claims.py decides the paper's claims on those ladders.
 Beyond the paper, it runs the third-order plant (motor_arm x vud, fixed, fae x
 m = 2, 3 fuzzy sets) into table3_beyond_paper.csv and a section of report.md.
-The step study behind each scenario's step is harness/step_study.py.
+The step study behind each scenario's step is harness/studies/step_study.py.
 """
 from __future__ import annotations
 
 import csv
 import math
+import shutil
 import sys
 import time as clock
 from pathlib import Path
 
+import numpy as np
+
+from .. import cli_args, variants
+from .. import scenario as scenarios
+from ..cases import Case, default_jobs, run_cases
+from ..units import variable_unit, with_unit
 from . import claims as claims_module
-from . import scenario as scenarios
-from .cases import Case, default_jobs, run_cases
 from .step_study import _fmt, convergence_summary, load_convergence, validated_step
 
-ROOT = Path(__file__).resolve().parents[1]
-CONTROLLERS = tuple(scenarios.CONTROLLER_VARIANTS)  # vud, fixed, fae
+ROOT = Path(__file__).resolve().parents[2]
+CONTROLLERS = variants.NAMES  # vud, fixed, fae
 PENDULUM = ("pendulum_case1", "pendulum_case2", "pendulum_case3")
 ALL_SCENARIOS = (*PENDULUM, "manipulator")
 TABLE_COLUMNS = ("scenario", "controller", "ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec",
@@ -31,8 +36,6 @@ TABLE_COLUMNS = ("scenario", "controller", "ts", "es1_pct", "es2_pct", "ITAE", "
 PAPER_METRICS = ("ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec")
 BEYOND_PAPER = "motor_arm"  # a third-order plant of our own (docs/general_order.md)
 BEYOND_PAPER_SETS = (2, 3)  # fuzzy sets per input: M = 8 and 27 rules at order 3
-CONTROLLER_NAMES = {"vud": "proposed AFC (variable universes)", "fixed": "stand-in for [46] (fixed universes)",
-                    "fae": "stand-in for [28] (fixed universes + error estimator)"}
 
 
 # ------------------------------------------------------------------ tables
@@ -86,22 +89,18 @@ def beyond_paper_table(rows: list) -> str:
 
 def figures(rows: list, out: Path) -> list:
     """Figs. 4-8 like the paper's: x1 vs ym, x2 vs dym, e, de, ||e||, u of the three controllers."""
-    import matplotlib
+    import matplotlib  # here, not at module level: 1-3 s of import, paid only when figures are drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     paths = []
-    colours = {"vud": "tab:red", "fixed": "tab:blue", "fae": "tab:green"}
+    order = {name: k for k, name in enumerate((*variants.COMPARISONS, variants.PROPOSED))}  # proposed on top
     for name in ALL_SCENARIOS:
-        order = {"fixed": 0, "fae": 1, "vud": 2}  # the proposed controller drawn on top
         runs = sorted((r for r in rows if r["scenario"] == name and "signals" in r),
                       key=lambda r: order[r["controller"]])
         if not runs:
             continue
-        from .units import variable_unit, with_unit
-
         fig, axes = plt.subplots(3, 2, figsize=(11, 9), sharex=True)
         configured = scenarios.load(name)
         unit = {dotted: variable_unit(configured, dotted) for dotted in
@@ -116,7 +115,7 @@ def figures(rows: list, out: Path) -> list:
             for run in runs:
                 s = run["signals"]
                 values = np.hypot(s["reference.e"], s["reference.de"]) if signal is None else s[signal]
-                axis.plot(s["time"], values, color=colours[run["controller"]], lw=0.9, label=run["controller"])
+                axis.plot(s["time"], values, color=variants.COLOURS[run["controller"]], lw=0.9, label=run["controller"])
             if signal == "plant.y":
                 axis.plot(runs[0]["signals"]["time"], runs[0]["signals"]["reference.ym"], "k--", lw=0.8, label="ym")
             if signal == "plant.dy":
@@ -148,7 +147,7 @@ def choices_text() -> str:
 
 def peak_memory_mib() -> float:
     """Peak resident memory of this process and of its largest finished worker (Linux: KiB)."""
-    import resource
+    import resource  # here, not at module level: a Unix-only module that only this figure needs
 
     own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
@@ -230,8 +229,6 @@ DOCS_DIR = ROOT / "docs"
 
 
 def tables_command(args) -> int:
-    from . import cli_args
-
     out = Path(args.out)
     cli_args.refuse_tracked([out / name for name in ("table1.csv", "table2.csv", "table3_beyond_paper.csv", "report.md",
                                                      *(f"{n}.png" for n in ALL_SCENARIOS))])
@@ -291,8 +288,6 @@ def tables_command(args) -> int:
             print("error: --apply refused: the docs show complete runs over the scenarios' horizon "
                   "(no --stop, no failed run)", file=sys.stderr)
             return 1
-        import shutil
-
         target = DOCS_DIR / README_FIGURE
         shutil.copyfile(out / README_FIGURE, target)
         print(f"applied: {target} (the README's figure) from {out / README_FIGURE}")
@@ -300,8 +295,6 @@ def tables_command(args) -> int:
 
 
 def register(commands):
-    from . import cli_args
-
     tables = commands.add_parser("tables", help="run Table I/II (12 co-simulations) and the third-order "
                                                 "plant beyond the paper (6) and write the report")
     tables.add_argument("--out", default="results", help="output folder (default results/, ignored by git)")

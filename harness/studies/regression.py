@@ -27,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import datetime
+import importlib.metadata
 import io
 import json
 import os
@@ -41,11 +42,14 @@ from pathlib import Path
 
 import numpy as np
 
-from . import scenario as scenarios
-from .cases import Case
+from .. import cases as shared
+from .. import cli_args, variants
+from .. import scenario as scenarios
+from ..cases import Case
+from ..units import variable_unit, with_unit
 
-ROOT = Path(__file__).resolve().parents[1]
-REFERENCE_DIR = Path(__file__).resolve().parent / "references"
+ROOT = Path(__file__).resolve().parents[2]
+REFERENCE_DIR = ROOT / "harness" / "references"
 DEFAULT_REPORT_DIR = Path("results") / "regression"  # in the working directory, like tables' results/
 SIGNALS = ("plant.y", "plant.dy", "controller.u", "controller.theta1", "controller.theta2", "controller.theta3",
            "controller.theta4", "reference.e", "reference.de")
@@ -59,7 +63,7 @@ DEFAULT_TOLERANCES = {"atolx": 1e-3, "atoly": 0.0, "ltolx": 0.0, "ltoly": 1e-3, 
 
 def all_cases(names=None, controllers=None, overrides=()) -> list[Case]:
     names = list(names or scenarios.scenario_names())
-    controllers = list(controllers or scenarios.CONTROLLER_VARIANTS)
+    controllers = list(controllers or variants.NAMES)
     return [Case(n, c, overrides=tuple(overrides)) for n in names for c in controllers]
 
 
@@ -85,8 +89,6 @@ def run_cases(cases, workers: int | None = None, fmu_paths: dict | None = None, 
 
     Results in the order of ``cases``; a failed run keeps what it computed (NaN after it stopped).
     """
-    from . import cases as shared
-
     wanted = [dataclasses.replace(case, points=points, signals=SIGNALS, figure_interval=None) for case in cases]
     outcomes = shared.run_cases(wanted, jobs=workers, fmu_paths=fmu_paths, progress=False)
     return [CaseRun(case, outcome["start"], outcome["stop"], outcome["step"], outcome["time"], outcome["signals"],
@@ -103,8 +105,6 @@ def _relative(path: Path) -> str:
 
 
 def tool_versions() -> dict:
-    import importlib.metadata
-
     def version(package):
         try:
             return importlib.metadata.version(package)
@@ -181,7 +181,7 @@ class SignalComparison:
 def compare_signal(name, x_ref, y_ref, x_test, y_test, tolerances: dict | None = None,
                    keep_funnel: bool = False) -> SignalComparison:
     """Tube comparison of one signal with pyfunnel (reference and test must span the same x range)."""
-    import pyfunnel
+    import pyfunnel  # here, not at module level: 0.2 s of import, paid only when signals are compared
 
     x_ref, y_ref = np.asarray(x_ref, float), np.asarray(y_ref, float)
     x_test, y_test = np.asarray(x_test, float), np.asarray(y_test, float)
@@ -262,12 +262,10 @@ def compare_case(run: CaseRun, reference: Reference | None, tolerances: dict | N
 # ------------------------------------------------------------------ report
 def plot_signal(path: Path, case: Case, comparison: SignalComparison, reference: Reference, run: CaseRun):
     """Reference, tube and new result: the whole horizon, a zoom around the worst point, the excursion."""
-    import matplotlib
+    import matplotlib  # here, not at module level: 1-3 s of import, paid only when a failing signal is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from .units import variable_unit, with_unit
 
     name = comparison.signal
     unit = variable_unit(scenarios.load(case.scenario), name)
@@ -398,8 +396,6 @@ def regress(cases, update: bool = False, report_dir=DEFAULT_REPORT_DIR, toleranc
 
 
 def regress_command(args) -> int:
-    from . import cli_args
-
     names = args.scenarios or scenarios.scenario_names()
     overrides = tuple(args.set or ())
     if args.update and overrides:
@@ -434,13 +430,11 @@ def regress_command(args) -> int:
 
 
 def register(commands):
-    from . import cli_args
-
     regress_parser = commands.add_parser(
         "regress", help="compare every case with its reference result inside a tolerance tube (pyfunnel)")
     regress_parser.add_argument("scenarios", nargs="*", metavar="SCENARIO", type=cli_args.scenario,
                                 help=f"scenario names (default: all: {', '.join(scenarios.scenario_names())})")
-    regress_parser.add_argument("--controller", nargs="+", choices=tuple(scenarios.CONTROLLER_VARIANTS),
+    regress_parser.add_argument("--controller", nargs="+", choices=variants.NAMES,
                                 help="controllers (default: all)")
     regress_parser.add_argument("--update", action="store_true",
                                 help="rewrite the reference results from this run (the only way they change)")

@@ -10,9 +10,13 @@ import itertools
 import math
 from dataclasses import dataclass, field
 
-from . import scenario as scenarios
-from .scenario import CONTROLLER_VARIANTS, Scenario, ScenarioError
-from .scores import SCORE_KEYS
+import numpy as np
+
+from .. import scenario as scenarios
+from ..master import ALGORITHMS, Master, resolve_fmu
+from ..scenario import Scenario, ScenarioError
+from ..scores import SCORE_KEYS
+from ..variants import CONTROLLER_VARIANTS
 
 SCENARIO_SETTINGS = ("step", "stop")  # sweepable scenario settings besides instance parameters
 KEY_DIGITS = 12  # grid values match on resume when equal to 12 significant digits
@@ -30,8 +34,6 @@ class Grid:
 
 def parse_grid(text: str) -> Grid:
     """``NAME=START:STOP:N`` (linspace), ``NAME=START:STOP:N:log`` (geomspace) or ``NAME=V1,V2,...``."""
-    import numpy as np
-
     name, equals, spec = text.partition("=")
     name, spec = name.strip(), spec.strip()
     usage = (f"--grid {text!r}: write NAME=START:STOP:N (N evenly spaced values), NAME=START:STOP:N:log "
@@ -113,8 +115,6 @@ def _scenario_point(scenario: Scenario, controller: str, names, values) -> Scena
 def plan_sweep(scenario_name, controllers, grids, metric="ITAE", stop=None, step=None,
                algorithm="feedthrough", fmu_paths=None) -> SweepPlan:
     """Validate everything against the scenario and the FMUs before any point runs."""
-    from .master import ALGORITHMS, Master, resolve_fmu
-
     scenario = scenarios.configure(scenario_name, step=step, stop=stop)
     controllers = tuple(dict.fromkeys(controllers))
     for controller in controllers:

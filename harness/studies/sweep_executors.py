@@ -9,14 +9,16 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import multiprocessing
 import os
 import signal
 import tempfile
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from .cases import Case, run_case
-from .scenario import ScenarioError
-from .scores import SCORE_KEYS
+from ..cases import Case, run_case
+from ..scenario import ScenarioError
+from ..scores import SCORE_KEYS
 from .sweep_grid import SweepPlan
 
 SCHEDULER_TIMEOUT = "20s"  # how long to try reaching a Dask scheduler
@@ -103,9 +105,6 @@ class LocalPool:
     """A process pool on this machine (spawned workers: no state inherited from the parent)."""
 
     def __init__(self, jobs: int, function=None):
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
         self.jobs = jobs
         self.function = function or run_point  # tests swap in a module-level wrapper
         self.executor = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
@@ -115,8 +114,6 @@ class LocalPool:
         return f"local pool, {self.jobs} process{'es' if self.jobs != 1 else ''}"
 
     def run(self, tasks):
-        from concurrent.futures import as_completed
-
         futures = [self.executor.submit(self.function, task) for task in tasks]
         for future in as_completed(futures):
             yield _outcome(future)
@@ -133,7 +130,7 @@ class DaskPool:
 
     def __init__(self, address: str, plan: SweepPlan):
         try:
-            from distributed import Client
+            from distributed import Client  # optional: the cluster extra; 1-3 s of import
         except ImportError:
             raise ScenarioError("--scheduler needs dask.distributed: pip install 'afc-fmi[cluster]' "
                                 "(or pip install 'dask[distributed]')") from None
@@ -143,7 +140,7 @@ class DaskPool:
             raise ScenarioError(f"cannot reach the Dask scheduler at {address!r}: {error}") from None
         self.address = address
 
-        def worker_can_run():  # defined here so cloudpickle ships it by value
+        def worker_can_run():  # defined here so cloudpickle ships it by value, with its import
             import importlib.util
 
             return all(importlib.util.find_spec(module) is not None for module in ("harness", "fmpy", "numpy"))
@@ -170,13 +167,13 @@ class DaskPool:
         return f"Dask scheduler {self.address}, {self.workers} worker{'s' if self.workers != 1 else ''}"
 
     def run(self, tasks):
-        from distributed import as_completed
+        from distributed import as_completed as dask_as_completed  # optional, as above
 
         self.futures = []
         for task in tasks:
             task = dict(task, fmu_hashes=self.hashes)
             self.futures.append(self.client.submit(run_point, task, self.blobs, pure=False))
-        for future in as_completed(self.futures):
+        for future in dask_as_completed(self.futures):
             yield _outcome(future)
 
     def close(self, cancel: bool = False):

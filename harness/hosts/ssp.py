@@ -19,8 +19,8 @@ Start values of the connected inputs (``--start-inputs``, on by default)
 An engine that does not propagate values along the connections before
 ``fmi2ExitInitializationMode`` (fmpy's SSP simulator starts every connector
 at 0) would hand the controller e(0) = de(0) = 0, and the controller latches
-those for the modified error of Remark 3 (SPEC section 3): the modification
-is then off.  With ``--start-inputs`` each connected input also gets, in its
+those for the modified error of Remark 3 (docs/model.md section 5 (the modified
+tracking error)): the modification is then off.  With ``--start-inputs`` each connected input also gets, in its
 instance's parameter set, the consistent start value that our master
 propagates at the start time (e.g. ``controller.e = ym(0) - y(0)``).  SSP
 parameter bindings may set the start values of inputs (they are applied
@@ -41,10 +41,14 @@ import zipfile
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
-from . import scenario as scenarios
-from .fmi import ModelInfo
-from .master import resolve_fmu, simulate
-from .scenario import Scenario, ScenarioError
+import build_fmu
+
+from .. import cli_args, variants
+from .. import scenario as scenarios
+from ..fmi import ModelInfo
+from ..master import resolve_fmu, simulate, validate
+from ..scenario import Scenario, ScenarioError
+from ..studies.step_study import load_convergence, validated_step
 
 NS_SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 NS_SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
@@ -158,14 +162,10 @@ def system_structure(scenario: Scenario, infos: dict, sources: dict, name: str) 
 def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inputs: bool = True) -> Path:
     """Write ``scenario`` (controller variant already set) as an SSP 1.0 package to ``out``."""
     if fmu_paths is None:
-        import build_fmu
-
         fmu_paths = build_fmu.ensure_built()
     out = Path(out)
     paths = {name: resolve_fmu(spec.fmu, scenario, fmu_paths) for name, spec in scenario.components.items()}
     infos = {name: ModelInfo.read(path) for name, path in paths.items()}
-    from .master import validate
-
     validate(scenario, infos)
     sources = {name: f"resources/{infos[name].model_identifier}.fmu" for name in scenario.components}
     parameters = {name: dict(spec.parameters) for name, spec in scenario.components.items()}
@@ -174,7 +174,7 @@ def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inp
             instance, variable = dotted.split(".", 1)
             parameters[instance][variable] = value
     variant = scenario.components[scenario.controller_instance].parameters.get("variant")
-    controller = next((k for k, v in scenarios.CONTROLLER_VARIANTS.items() if v == variant), "vud")
+    controller = variants.name_of(variant)
     name = f"{scenario.name}_{controller}"
     out.parent.mkdir(parents=True, exist_ok=True)
     with zipfile.ZipFile(out, "w", compression=zipfile.ZIP_DEFLATED) as package:
@@ -192,14 +192,10 @@ def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inp
 
 
 def export_command(args) -> int:
-    from . import cli_args
-
     overrides = list(args.set or [])
     cli_args.check_assignments(scenarios.load(args.scenario), overrides)
     step, note = args.step, ""
     if step is None:  # the step a host that delays every link (Jacobi) needs for 1 %
-        from .step_study import load_convergence, validated_step
-
         step = validated_step(load_convergence(), scenarios.load(args.scenario).name, args.controller, "jacobi")
         note = (f"; step {step:g} s, the Jacobi validated step (1 %) of docs/convergence.md" if step else
                 "; no Jacobi validated step in the study: the scenario's step")
@@ -215,12 +211,10 @@ def export_command(args) -> int:
 
 
 def register(commands):
-    from . import cli_args
-
     export = commands.add_parser("export-ssp", help="export a scenario as an SSP 1.0 package (SystemStructure.ssd, "
                                                     "parameter sets, FMUs)")
     export.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
-    export.add_argument("--controller", choices=tuple(scenarios.CONTROLLER_VARIANTS), default="vud")
+    export.add_argument("--controller", choices=variants.NAMES, default=variants.PROPOSED)
     export.add_argument("--out", help="the .ssp file to write (default: results/SCENARIO_CONTROLLER.ssp)")
     export.add_argument("--step", type=cli_args.positive_float,
                         help="communication step written to the package (default: the Jacobi validated step (1 %%) "

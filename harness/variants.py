@@ -1,0 +1,36 @@
+"""The controller-variant registry: one row per variant of the controller FMU.
+
+A variant is a value of the controller FMU's ``variant`` parameter (fmu_src/afc_math.py,
+``VARIANT_*``; docs/model.md section 6 (the three controllers)).  Everything in the harness that
+lists the controllers (the command-line choices, the Table I/II report and its figures, the claims
+check, the step study, the regression's cases, sweeps) takes them from here, so a new variant is
+its row below plus its math in the FMU (Python and C).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Variant:
+    name: str  # on the command line and in file names: --controller NAME
+    code: int  # the controller FMU's ``variant`` parameter
+    label: str  # what it is, in the paper's terms
+    colour: str  # in the report's figures (matplotlib colour)
+
+
+VARIANTS = (
+    Variant("vud", 1, "proposed AFC (variable universes)", "tab:red"),
+    Variant("fixed", 2, "stand-in for [46] (fixed universes)", "tab:blue"),
+    Variant("fae", 3, "stand-in for [28] (fixed universes + error estimator)", "tab:green"),
+)
+PROPOSED = "vud"  # the paper's controller: the claims compare it with every other variant; the default
+CONTROLLER_VARIANTS = {v.name: v.code for v in VARIANTS}  # {"vud": 1, "fixed": 2, "fae": 3}
+NAMES = tuple(CONTROLLER_VARIANTS)
+COMPARISONS = tuple(name for name in NAMES if name != PROPOSED)  # what the proposed controller is compared with
+COLOURS = {v.name: v.colour for v in VARIANTS}
+
+
+def name_of(code: int, default: str = PROPOSED) -> str:
+    """The variant whose ``variant`` parameter is ``code`` (``default`` when none is)."""
+    return next((v.name for v in VARIANTS if v.code == code), default)
