@@ -1,6 +1,7 @@
 """AdaptiveFuzzyController: the variable-universe direct adaptive fuzzy controller as an FMU.
 
-Pan, Er, Huang, Wang, IEEE Trans. Fuzzy Systems 19(5), 2011; SPEC.md sections 1-5, 9.
+Pan, Er, Huang, Wang, IEEE Trans. Fuzzy Systems 19(5), 2011; docs/model.md sections 1-6 (the controller)
+and section 11 (co-simulation semantics).
 The math is in ``afc_math``; this class only adapts it to FMI.
 
 Co-simulation semantics:

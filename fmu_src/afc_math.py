@@ -2,8 +2,8 @@
 
 For a plant of order n, x^(n) = f(x) + g(x) u  [1], with m fuzzy sets per
 FLS input (n = 1..ORDER_MAX, m = 2..SETS_MAX, M = m^n <= RULES_MAX rules).
-Equation numbers in brackets are the paper's; SPEC.md sections 1-5 and
-docs/general_order.md restate them.  With n = 2, m = 2 every function gives,
+Equation numbers in brackets are the paper's; docs/model.md sections 1-6 (the
+controller) and docs/general_order.md restate them.  With n = 2, m = 2 every function gives,
 bit for bit, the paper's two-input, two-set controller.
 
 Vectors are tuples (or lists) indexed from 0: error[i] = e^(i), the i-th
@@ -115,7 +115,8 @@ def contraction_factor(x: float, lambda_ce: float, kappa: float) -> float:
 
 
 def normalized_input(x: float, alpha: float, universe: float) -> float:
-    """z = x / alpha(x)  [7], saturated to the universe [-E, E] (SPEC choice)."""
+    """z = x / alpha(x)  [7], saturated to the universe [-E, E]
+    (docs/model.md section 10, choice 1 (saturated))."""
     z = x / alpha
     if z > universe:
         return universe

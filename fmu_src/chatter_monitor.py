@@ -2,8 +2,9 @@
 
 A host that delays every link by one communication step (Jacobi: every engine but a
 feedthrough-aware master) needs about 4x smaller steps than a feedthrough master; at a step
-too large for it the stiff loop (SPEC section 8) makes u zig-zag from step to step while the
-run still completes and settles (pendulum case 1 vud, Jacobi 0.4 ms: ITAE 12x, Ec 85x).
+too large for it the stiff loop (docs/model.md section 10, choice 7 (sampled-data controller))
+makes u zig-zag from step to step while the run still completes and settles (pendulum case 1
+vud, Jacobi 0.4 ms: ITAE 12x, Ec 85x).
 
 Statistic: the frequency of the sine whose total variation per second, over its mean
 magnitude, equals u's,

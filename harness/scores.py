@@ -1,4 +1,4 @@
-"""Scores of one run (SPEC section 7), on the recorded communication grid.
+"""Scores of one run (docs/model.md section 9 (scores)), on the recorded communication grid.
 
 Trapezoidal integration; ||e|| = sqrt(e^2 + de^2 + ...), the norm of the whole
 error vector (e, de, d2e, ... up to the plant's order; sqrt(e^2 + de^2) for the paper's plants).  Pure functions of numpy
@@ -41,7 +41,8 @@ def control_energy(time, u) -> float:
 
 
 def settling_time(time, e, ym, fraction: float = 0.05) -> float:
-    """ts: the earliest time after which |e| <= fraction * max|ym| until T (SPEC choice).
+    """ts: the earliest time after which |e| <= fraction * max|ym| until T
+    (docs/model.md section 10, choice 13 (settling time)).
 
     0 if |e| stays inside the band from the start; T (the last time) if the
     last sample is outside it, i.e. the run never settles.
@@ -71,7 +72,8 @@ def total_variation_rate(time, u) -> float:
 
 
 def score(time, e, de, ym, dym, u, higher=()) -> dict:
-    """Every score of SPEC section 7 for one run; ``higher`` = (d2e, ...) for plants of order > 2."""
+    """Every score of docs/model.md section 9 (scores) for one run; ``higher`` = (d2e, ...) for plants of
+    order > 2."""
     es1, es2 = steady_state_errors(time, e, de, ym, dym)
     return {
         "ts": settling_time(time, e, ym),

@@ -6,7 +6,8 @@
  *   den = lp (4/3 - mp cos^2 x1 / (mc + mp))
  *   dx2 = (gv sin x1 - mp lp x2^2 cos x1 sin x1 / (mc + mp)) / den
  *         + (cos x1 / (mc + mp)) / den * u + d(t)                       (37)
- *   d(t) = dist_gain * (3 cos 2t + 2 sin((0.09 t + 1) t))   (SPEC choice: additive in dx2)
+ *   d(t) = dist_gain * (3 cos 2t + 2 sin((0.09 t + 1) t))
+ *   (docs/model.md section 10, choice 10 (disturbance): additive in dx2)
  */
 #include <math.h>
 
@@ -25,7 +26,8 @@ void plant_params(ModelInstance *m, double *params) {
     params[5] = V(m, dist_gain);
 }
 
-/* d(t) = dist_gain * (3 cos 2t + 2 sin((0.09 t + 1) t)) in rad/s2 (SPEC case 2) */
+/* d(t) = dist_gain * (3 cos 2t + 2 sin((0.09 t + 1) t)) in rad/s2
+ * (case 2 of docs/model.md section 8 (scenarios)) */
 static double pendulum_disturbance(double t, double dist_gain) {
     if (dist_gain == 0.0) return 0.0;
     return dist_gain * (3.0 * cos(2.0 * t) + 2.0 * sin((0.09 * t + 1.0) * t));
@@ -40,7 +42,7 @@ static void pendulum_derivative(double t, const double x[], double u, const doub
     double s = sin(x1);
     double den = lp * (FOUR_THIRDS - mp_over_mt * c * c);                              /* (37) */
     double rate = (gv * s - mp_lp_over_mt * x2 * x2 * c * s + c * inv_mt * u) / den;  /* (37) */
-    if (dist_gain != 0.0) /* d(t), SPEC choice: additive in dx2 */
+    if (dist_gain != 0.0) /* d(t), docs/model.md section 10, choice 10 (disturbance): additive in dx2 */
         rate += dist_gain * (3.0 * cos(2.0 * t) + 2.0 * sin((0.09 * t + 1.0) * t));
     dx[0] = x2;
     dx[1] = rate;

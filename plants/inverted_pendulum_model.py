@@ -1,6 +1,6 @@
 """Inverted pendulum on a cart, eq. (37) of Pan, Er, Huang, Wang (IEEE TFS 2011).
 
-SPEC.md section 6.  State x1 = pole angle (rad), x2 = its rate (rad/s),
+docs/model.md section 7 (the plants).  State x1 = pole angle (rad), x2 = its rate (rad/s),
 input u = force on the cart (N), output y = x1:
 
     dx1 = x2                                                            (37)
@@ -8,7 +8,7 @@ input u = force on the cart (N), output y = x1:
     dx2 = (gv sin x1 - mp lp x2^2 cos x1 sin x1 / (mc + mp)) / den
           + (cos x1 / (mc + mp)) / den * u + d(t)                       (37)
 
-with the disturbance (SPEC choice: it enters dx2 additively)
+with the disturbance (docs/model.md section 10, choice 10 (disturbance): it enters dx2 additively)
 
     d(t) = dist_gain * (3 cos 2t + 2 sin((0.09 t + 1) t))
 
@@ -40,14 +40,16 @@ def pendulum_params(gv: float, mc: float, mp: float, lp: float, dist_gain: float
     """The constants tuple of :func:`pendulum_derivative`.
 
     gv gravity (m/s2), mc cart mass (kg), mp pole mass (kg), lp pole
-    half-length (m), dist_gain gain of the disturbance d(t) (1 = SPEC cases 2, 3).
+    half-length (m), dist_gain gain of the disturbance d(t) (1 = cases 2, 3 of docs/model.md
+    section 8 (scenarios)).
     """
     mt = mc + mp
     return (float(gv), float(lp), mp * lp / mt, mp / mt, 1.0 / mt, float(dist_gain))
 
 
 def pendulum_disturbance(t: float, dist_gain: float) -> float:
-    """d(t) = dist_gain * (3 cos 2t + 2 sin((0.09 t + 1) t)) in rad/s2 (SPEC case 2)."""
+    """d(t) = dist_gain * (3 cos 2t + 2 sin((0.09 t + 1) t)) in rad/s2 (case 2 of docs/model.md
+    section 8 (scenarios))."""
     if dist_gain == 0.0:
         return 0.0
     return dist_gain * (3.0 * _cos(2.0 * t) + 2.0 * _sin((0.09 * t + 1.0) * t))
@@ -64,6 +66,6 @@ def pendulum_derivative(t: float, x1: float, x2: float, u: float, params: tuple)
     s = _sin(x1)
     den = lp * (FOUR_THIRDS - mp_over_mt * c * c)  # (37)
     dx2 = (gv * s - mp_lp_over_mt * x2 * x2 * c * s + c * inv_mt * u) / den  # (37)
-    if dist_gain != 0.0:  # d(t), SPEC choice: additive in dx2
+    if dist_gain != 0.0:  # d(t), docs/model.md section 10, choice 10 (disturbance): additive in dx2
         dx2 += dist_gain * (3.0 * _cos(2.0 * t) + 2.0 * _sin((0.09 * t + 1.0) * t))
     return x2, dx2

@@ -1,7 +1,8 @@
 """Manipulator: the single-link manipulator with friction (38, 39) as a co-simulation FMU.
 
-SPEC.md sections 6 and 9.  The model equations are in ``manipulator_model``,
-the integrator in ``plant_integration``; this class only adapts them to FMI.
+docs/model.md section 7 (the plants) and section 11 (co-simulation semantics).  The model
+equations are in ``manipulator_model``, the integrator in ``plant_integration``; this class only
+adapts them to FMI.
 
 Co-simulation semantics:
 * y, dy are the states x1, x2, d the friction term -(sgn(x2) cr + vr x2)/J

@@ -1,5 +1,5 @@
 """Single-link manipulator with friction and a varying payload, eqs. (38, 39)
-of Pan, Er, Huang, Wang (IEEE TFS 2011); SPEC.md section 6.
+of Pan, Er, Huang, Wang (IEEE TFS 2011); docs/model.md section 7 (the plants).
 
 State x1 = link angle (rad), x2 = its rate (rad/s), input u = joint torque
 (N.m), output y = x1:

@@ -2,8 +2,9 @@
 tracking errors e = ym - y, de = dym - dy (and d2e = ddym - d2y for a
 third-order plant) as a co-simulation FMU.
 
-SPEC.md sections 1, 6 and 9 (pendulum: amplitude pi/6, manipulator: 1;
-omega = 1 rad/s in both).
+docs/model.md section 1 (the problem), section 8 (scenarios) and section 11 (co-simulation
+semantics); the scenarios' amplitude is pi/6 for the pendulum, 1 for the manipulator, and
+omega = 1 rad/s in both.
 
 Co-simulation semantics:
 * ym, dym, ddym are functions of the current communication time only (no

@@ -1,4 +1,4 @@
-"""The controller math against the paper (SPEC sections 1-5)."""
+"""The controller math against the paper (docs/model.md sections 1-6 (the controller))."""
 import math
 import random
 

@@ -1,9 +1,10 @@
 """The closed loop written again from the paper's equations, in this file alone, against the master.
 
-Nothing here imports fmu_src, plants or harness/oracle.py: the controller (Remark 3, (23),
-(7), sigmoid memberships, (8), (9), (30) for n = 2, (31), the fae estimator of SPEC
-section 5), the pendulum (37), the manipulator (38, 39), the reference and RK4 are written
-from /work/shared/SPEC.md, vectorised over a batch of cases (one row per case).  The
+Nothing here imports fmu_src, plants or harness/studies/oracle.py: the controller (Remark 3, (23),
+(7), sigmoid memberships, (8), (9), (30) for n = 2, (31), the fae estimator of docs/model.md
+section 6 (the three controllers)), the pendulum (37), the manipulator (38, 39), the reference and
+RK4 are written from the paper as docs/model.md sections 1-8 (the problem to the scenarios) restate
+it, vectorised over a batch of cases (one row per case).  The
 sampled-data semantics are those of an embedded target and of our master: at each
 communication point t_n the reference and the controller read the plant outputs at t_n
 (direct feedthrough, no delay), u(t_n) is held over [t_n, t_n + h] while the plant is

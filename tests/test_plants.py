@@ -49,7 +49,7 @@ class Instance(Driven):
 
 
 def pendulum_rhs(t, x, u, gv, mc, mp, lp, dist_gain):
-    """SPEC eq. (37) plus d(t), written out independently of plants/."""
+    """Eq. (37) plus d(t) (docs/model.md section 7 (the plants)), written out independently of plants/."""
     x1, x2 = x
     mt = mc + mp
     den = lp * (4.0 / 3.0 - mp * math.cos(x1) ** 2 / mt)
@@ -60,7 +60,7 @@ def pendulum_rhs(t, x, u, gv, mc, mp, lp, dist_gain):
 
 
 def manipulator_rhs(t, x, u, gv, lr, dr, cr, vr, mr0, mr1):
-    """SPEC eqs. (38, 39), written out independently of plants/."""
+    """Eqs. (38, 39) (docs/model.md section 7 (the plants)), written out independently of plants/."""
     x1, x2 = x
     mr = mr0 + mr1 * math.sin(t)
     J = 1.33 * mr * lr ** 2

@@ -1,4 +1,4 @@
-"""Score functions on signals with known answers (SPEC section 7)."""
+"""Score functions on signals with known answers (docs/model.md section 9 (scores))."""
 import math
 
 import numpy as np
