@@ -34,7 +34,6 @@ from pythonfmu import DefaultExperiment
 from afc_slave_base import INPUT, OUTPUT, PARAMETER, Variable, finite, non_negative, positive
 from afc_slave_base import TableSlave as Fmi2Slave
 
-DIMENSIONLESS = ""
 _INF = math.inf
 # u depends on every error and reference input: n is a parameter (ym.. with fls_input = 2)
 FEEDTHROUGH = ("e", "de", "ym", "dym", "d2e", "d3e", "d2ym", "d3ym")

@@ -194,8 +194,4 @@ def run_cases(cases: list, jobs: int | None = None, description: str = "co-simul
     return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths), cases, jobs, description, progress)
 
 
-def as_float(value) -> float:
-    return float(value) if value is not None else float("nan")
-
-
 __all__ = ["Case", "run_case", "run_cases", "parallel_map", "default_jobs", "status_of", "one_line", "resample"]

@@ -50,7 +50,6 @@ class ModelInfo:
     guid: str
     variables: dict  # name -> fmpy ScalarVariable
     direct_dependencies: dict  # output name -> tuple of input names it depends on directly
-    can_get_set_state: bool
     fmi_version: str = "2.0"  # "3.0": driven through fmpy's FMU3Slave (the native edition's FMI 3.0 FMUs)
 
     @classmethod
@@ -74,8 +73,7 @@ class ModelInfo:
             else:
                 dependencies[unknown.variable.name] = tuple(
                     d.name for d in unknown.dependencies if d.causality == "input")
-        return cls(path, md.coSimulation.modelIdentifier, md.guid, variables, dependencies,
-                   bool(md.coSimulation.canGetAndSetFMUstate), md.fmiVersion)
+        return cls(path, md.coSimulation.modelIdentifier, md.guid, variables, dependencies, md.fmiVersion)
 
 
 @dataclass

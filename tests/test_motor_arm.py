@@ -46,7 +46,7 @@ def test_the_plant_has_the_form_y3_equals_f_plus_g_u():
 
 
 # ------------------------------------------------ the closed loop, from the equations
-def independent_closed_loop(scenario, controller_name):
+def independent_closed_loop(scenario):
     """plant -> reference -> controller on the master's grid, written here from the equations."""
     plant = scenario.components["plant"].parameters
     J, b, m, lc, Kt, Ke, R, L = (plant[k] for k in ("J", "b", "m", "lc", "Kt", "Ke", "R", "L"))
@@ -131,7 +131,7 @@ def test_master_run_matches_the_closed_loop_written_from_the_equations(fmu_paths
     scenario = (scenarios.load("motor_arm").with_controller(controller).with_parameter("stop", 0.6)
                 .with_parameter("controller.sets", sets))
     result = simulate(scenario, fmu_paths=fmu_paths)
-    expected = independent_closed_loop(scenario, controller)
+    expected = independent_closed_loop(scenario)
     ours = np.column_stack([result.signal(name) for name in
                             ("plant.y", "controller.u", "controller.theta1", "controller.d2E")])
     assert ours.shape == expected.shape

@@ -292,10 +292,6 @@ def _c_table(kind, rows):
     return table
 
 
-def c_matrix(rows):
-    return _c_table(Matrix, rows)
-
-
 def c_boundary_table(boundaries):
     return _c_table(Boundaries, boundaries)
 

@@ -84,7 +84,6 @@ from ..scores import control_energy, iae, itae, score
 from ..studies.regression import compare_signal
 from .ssp import export_ssp
 
-ENGINES = ("master", "jacobi", "fmpy", "ecos")
 AFC_NS = "https://afc-fmi.invalid/ssp/experiment"
 SSD_NS = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC_NS = "http://ssp-standard.org/SSP1/SystemStructureCommon"

@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 NS_OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
-NANOSECONDS = 1_000_000_000
 
 
 class LibcosimUnavailable(RuntimeError):

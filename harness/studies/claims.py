@@ -33,7 +33,6 @@ from .. import variants
 REPRODUCED = "reproduced"
 NOT_REPRODUCED = "not reproduced"
 UNDECIDED = "not decided at this accuracy"
-VERDICTS = (REPRODUCED, NOT_REPRODUCED, UNDECIDED)
 
 CONTROLLERS = variants.NAMES  # vud, fixed, fae
 PROPOSED = variants.PROPOSED  # vud: each claim compares it with every other variant
