@@ -151,7 +151,7 @@ class _SlaveMeta(ABCMeta):
     script once more, with the module's globals and a fresh locals dict, to find the
     slave class; it keeps a reference to a list of each new class's MRO, so every class
     created there leaks with all its functions (about 10 kB per instantiate, measured
-    in tests/test_reliability.py), and it releases the (borrowed) module globals once.
+    in tests/test_life_cycle.py), and it releases the (borrowed) module globals once.
     On such a re-execution this metaclass hands back the class already defined in the
     module instead of building a new one, and takes the one reference to the module
     globals that the wrapper is about to release (until now the leaked functions held

@@ -22,6 +22,17 @@ def fmu_paths():
     return build_fmu.ensure_built()
 
 
+@pytest.fixture(scope="module")
+def unzipped(fmu_paths, tmp_path_factory):
+    """{model identifier: extracted FMU folder}, extracted once per test module."""
+    from fmpy import extract
+
+    from tests.fmu_variables import FMU_IDS
+
+    return {fmu_id: extract(str(fmu_paths[fmu_id]), str(tmp_path_factory.mktemp(fmu_id)))
+            for fmu_id in FMU_IDS}
+
+
 _TEMP_BEFORE = set()
 
 

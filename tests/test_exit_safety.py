@@ -4,7 +4,7 @@ pythonfmu 0.7's library keeps a static ``std::shared_ptr`` (``pyState``); at pro
 C++ runtime destroys it and then the library's ELF destructor (``finalizePythonInterpreter``)
 releases it a second time, decrementing a count inside the freed block: depending on the heap
 state at exit, glibc aborts with "corrupted double-linked list" (seen intermittently in
-tests/test_reliability.py's 200-cycle subprocess and at the exit of ``python -m harness``).
+tests/test_life_cycle.py's 200-cycle subprocess and at the exit of ``python -m harness``).
 ``fmu_src/afc_slave_base.py`` releases it from a Python atexit handler instead (Linux).
 """
 from __future__ import annotations
@@ -14,10 +14,11 @@ import shutil
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 
-from tests.test_reliability import ROOT
+ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the exit-time defect is Linux's")
 

@@ -40,11 +40,11 @@ from ..cases import parallel_map
 
 ROOT = Path(__file__).resolve().parents[2]
 CONTROLLER_TESTS = ("tests/test_adaptive_law_fmu.py", "tests/test_independent_loop.py",
-                    "tests/test_controller_math.py", "tests/test_controller_fmu.py")
+                    "tests/test_afc_math.py", "tests/test_adaptive_fuzzy_controller_fmu.py")
 PLANT_TESTS = ("tests/test_plants.py", "tests/test_independent_loop.py")
 REFERENCE_TESTS = ("tests/test_plants.py", "tests/test_independent_loop.py")
-GENERAL_TESTS = ("tests/test_general_order.py", "tests/test_controller_math.py")  # order n, m sets (issue 17)
-MOTOR_TESTS = ("tests/test_motor_arm.py",)  # the third-order plant and its closed loop (issue 17)
+GENERAL_TESTS = ("tests/test_general_order.py", "tests/test_afc_math.py")  # order n, m sets (issue 17)
+MOTOR_TESTS = ("tests/test_dc_motor_arm.py",)  # the third-order plant and its closed loop (issue 17)
 TIMEOUT_S = 600
 SKIPPED_IN_COPY = {".git", ".venv", "build", "results", "__pycache__", ".pytest_cache"}
 

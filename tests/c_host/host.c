@@ -26,13 +26,13 @@
  * 3 an FMI call returned a status >= fmi2Error (reported on stderr; the instance is
  * then freed and the host exits normally, which shows that it survived the error).
  *
- * Build and run (tests/test_reliability.py does this):
+ * Build and run (tests/test_c_host.py does this):
  *   cc -O2 -o host tests/c_host/host.c -ldl
  *   LD_PRELOAD=$LIBPYTHON PYTHONHOME=$PREFIX ./host ...
  * The pythonfmu binary does not link libpython, so libpython must be loaded first.
  *
  * The same file builds a Windows host (LoadLibrary/GetProcAddress instead of dlopen/dlsym),
- * which runs the native edition's win64 DLLs, e.g. under wine (tests/test_native_windows.py):
+ * which runs the native edition's win64 DLLs, e.g. under wine (tests/test_build_native_windows.py):
  *   python -m ziglang cc -target x86_64-windows-gnu -O2 -o host.exe tests/c_host/host.c
  *   wine64 host.exe binaries\win64\InvertedPendulum.dll ...
  * Its standard output is in binary mode, so its lines are the Linux host's, byte for byte.

@@ -1,0 +1,66 @@
+"""Scenario-file and command-line mistakes give one clear error line (exit 2), never a traceback.
+
+Name mistakes already in tests/test_master.py are not repeated here."""
+from __future__ import annotations
+
+import pytest
+
+from harness import scenario as scenarios
+from harness.cli import main as cli_main
+
+
+# ------------------------------------------------------------ scenario mistakes
+def edited_scenario(tmp_path, edit):
+    text = (scenarios.SCENARIO_DIR / "pendulum_case1.toml").read_text()
+    edited = edit(text)
+    assert edited != text, "the edit did not apply"
+    path = tmp_path / "edited.toml"
+    path.write_text(edited)
+    return path
+
+
+MISTAKES = [  # (what, edit, expected text); name mistakes already in test_master.py are not repeated
+    ("unknown instance in a connection target", lambda t: t.replace('to = "plant.u"', 'to = "plnt.u"'),
+     "connection to 'plnt.u': unknown instance 'plnt'; valid: plant, reference, controller"),
+    ("unknown instance in the record", lambda t: t.replace('"reference.ym", "reference.dym"',
+                                                             '"ref.ym", "reference.dym"'),
+     "record 'ref.ym': unknown instance 'ref'"),
+    ("an input recorded as an output", lambda t: t.replace('variables = ["plant.y",', 'variables = ["plant.u", "plant.y",'),
+     "record 'plant.u' is an input, not an output; valid outputs of plant: y, dy, d"),
+    ("an input set as a parameter", lambda t: t.replace("parameters = { mp = 0.1,", "parameters = { u = 1.0, mp = 0.1,"),
+     "InvertedPendulum has no parameter 'u'"),
+    ("an input connected twice", lambda t: t.replace('to = "reference.dy"', 'to = "reference.y"'),
+     "input 'reference.y' is connected twice"),
+    ("a scored signal that is not recorded", lambda t: t.replace('u = "controller.u"', 'u = "controller.alpha1"'),
+     "signal u = 'controller.alpha1' is not in record.variables"),
+    ("a missing FMU file (absolute path)",
+     lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "/nonexistent/TrackingReference.fmu"'),
+     "FMU file not found: /nonexistent/TrackingReference.fmu"),
+    ("no [experiment] table", lambda t: t.replace("[experiment]", "[experimentz]"), "missing key 'experiment'"),
+    ("a TOML syntax error", lambda t: t.replace("[experiment]", "[experiment"), "is not valid TOML"),
+    ("a parameter value that is not a number", lambda t: t.replace("lambda_ce = 0.99", 'lambda_ce = "0.99"'),
+     "components.controller: parameter lambda_ce = '0.99' is not a number"),
+    ("a fractional value for an Integer parameter",
+     lambda t: t.replace("parameters = { E1 =", "parameters = { fls_input = 1.5, E1 ="),
+     "components.controller: parameter fls_input = 1.5 is not an integer"),
+    ("an invalid parameter value (the FMU says why)", lambda t: t.replace("lambda_ce = 0.99", "lambda_ce = 1.0"),
+     "parameter lambda_ce = 1.0 is invalid; valid range: (0, 1)"),
+]
+
+
+@pytest.mark.parametrize("what,edit,expected", MISTAKES, ids=[m[0] for m in MISTAKES])
+def test_scenario_file_mistakes_give_one_clear_error(fmu_paths, tmp_path, capsys, what, edit, expected):
+    path = edited_scenario(tmp_path, edit)
+    assert cli_main(["run", str(path), "--step", "1e-3", "--stop", "0.01"]) == 2, what
+    err = capsys.readouterr().err
+    assert expected in err, err
+    assert err.count("error:") == 1, err
+
+
+@pytest.mark.parametrize("option,value", [("--step", "0"), ("--step", "nan"), ("--step", "-0.001"),
+                                          ("--step", "inf"), ("--stop", "nan"), ("--stop", "inf")])
+def test_a_bad_step_or_stop_on_the_command_line_is_one_clear_error(fmu_paths, capsys, option, value):
+    assert cli_main(["run", "pendulum_case1", option, value]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "Traceback" not in err, err
+    assert ("step" if option == "--step" else "stop") in err.split("error:")[1]
