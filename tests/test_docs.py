@@ -34,7 +34,52 @@ def _slug(heading: str) -> str:
 
 
 def _markdown_files():
-    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    return [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+
+
+def _link_targets(document: Path) -> set:
+    """The files (resolved) that a page links to, images included."""
+    targets = set()
+    for target in LINK.findall(document.read_text()):
+        if target.startswith(("http://", "https://", "mailto:")):
+            continue
+        path_part = target.partition("#")[0]
+        if path_part:
+            targets.add((document.parent / path_part).resolve())
+    return targets
+
+
+def test_every_file_under_docs_is_linked_from_another_page():
+    """Nothing in docs/ is an orphan: each file is linked from README.md or another page."""
+    linked = {}
+    for document in _markdown_files():
+        for target in _link_targets(document):
+            if target != document.resolve():
+                linked.setdefault(target, []).append(document.name)
+    files = [p for p in sorted((ROOT / "docs").rglob("*")) if p.is_file()]
+    orphans = [str(p.relative_to(ROOT)) for p in files if p.resolve() not in linked]
+    assert not orphans, f"files under docs/ that no page links to: {orphans}"
+
+
+def test_the_contents_page_lists_every_page_and_the_readme_links_the_contents():
+    listed = _link_targets(ROOT / "docs" / "index.md")
+    pages = [p for p in sorted((ROOT / "docs").rglob("*.md")) if p.name != "index.md"]
+    missing = [p.name for p in pages if p.resolve() not in listed]
+    assert not missing, f"docs/index.md does not list {missing}"
+    assert (ROOT / "docs" / "index.md").resolve() in _link_targets(ROOT / "README.md")
+
+
+def test_no_page_cites_the_projects_working_notes():
+    """A "SPEC" citation points outside the repository: cite the docs/model.md section it means."""
+    for document in _markdown_files():
+        for number, line in enumerate(document.read_text().splitlines(), 1):
+            assert not re.search(r"\bSPEC\b", line), f"{document.relative_to(ROOT)}:{number}: {line.strip()}"
+
+
+def test_readme_stays_a_readme():
+    """The manual lives in docs/: the README stays short (issue 21: at most about 150 lines)."""
+    lines = (ROOT / "README.md").read_text().splitlines()
+    assert len(lines) <= 160, f"README.md has {len(lines)} lines; move sections to docs/"
 
 
 def test_every_link_of_the_docs_resolves_inside_the_repository():
