@@ -25,7 +25,7 @@
  *   for each FMU: status = doStep(instance, t, step, noSetFMUStatePriorToCurrentPoint = true)
  *       stop if status > warning
  *
- * Built for the machine that runs the harness (build_native.host_library), with the
+ * Built for the machine that runs the harness (c_toolchain.host_library), with the
  * native edition's flags (-ffp-contract=off: t is computed exactly as Python computes it).
  */
 #include <math.h>
