@@ -20,8 +20,8 @@ import zipfile
 from pathlib import Path
 
 from . import scenario as scenarios
-from .fmi import FmiError, ModelInfo
-from .master import SimulationFailed, resolve_fmu, simulate
+from .fmi import FmiError, FmuFileError
+from .master import SimulationFailed, model_info, simulate
 from .scenario import ScenarioError
 
 USAGE_EXIT = 2  # a mistake in the command line or in a scenario file
@@ -155,8 +155,7 @@ def check_assignments(configured, assignments, fmu_paths: dict | None = None, op
             raise UsageError(f"{option} {dotted}={value:g}: unknown instance {instance!r}; "
                              f"valid: {', '.join(configured.components)}")
         if instance not in infos:
-            spec = configured.components[instance]
-            infos[instance] = ModelInfo.read(resolve_fmu(spec.fmu, configured, fmu_paths))
+            infos[instance] = model_info(configured, instance, fmu_paths)
         variables = infos[instance].variables
         parameters = [name for name, v in variables.items() if v.causality == "parameter"]
         found = variables.get(parameter)
@@ -278,7 +277,7 @@ def one_line(error: BaseException) -> str:
 
 def exit_status(error: BaseException) -> int:
     """2 for a usage mistake (also a parameter the FMU rejects when initialisation ends), else 1."""
-    if isinstance(error, (UsageError, ScenarioError)):
+    if isinstance(error, (UsageError, ScenarioError, FmuFileError)):
         return USAGE_EXIT
     fmi = _fmi_error(error)
     if fmi is not None and fmi.function == "fmi2ExitInitializationMode" and \

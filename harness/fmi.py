@@ -14,6 +14,7 @@ import ctypes
 import functools
 import shutil
 import tempfile
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +42,37 @@ class FmiError(RuntimeError):
         super().__init__(text)
 
 
+class FmuFileError(ValueError):
+    """A file given as an FMU is not one: empty, not a zip archive, no modelDescription.xml in it,
+    or a model description that cannot be read.  The message names the file and what it is."""
+
+
+FMU_IS = "an FMU is a zip archive holding modelDescription.xml"
+
+
+def check_fmu_file(path: Path) -> None:
+    """Raise FmuFileError, naming ``path``, unless it is a zip archive holding modelDescription.xml."""
+    if path.is_dir():
+        raise FmuFileError(f"{path} is a folder, not an FMU file ({FMU_IS})")
+    size = path.stat().st_size
+    if size == 0:
+        raise FmuFileError(f"{path} is empty (0 bytes), not an FMU ({FMU_IS})")
+    if not zipfile.is_zipfile(path):
+        with open(path, "rb") as stream:
+            head = stream.read(4)
+        what = "a truncated or damaged zip archive" if head.startswith(b"PK") else "not a zip archive"
+        raise FmuFileError(f"{path} is not an FMU: {what} ({size} bytes; {FMU_IS})")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = archive.namelist()
+    except (zipfile.BadZipFile, OSError) as error:
+        raise FmuFileError(f"{path} is not an FMU: a damaged zip archive ({error})") from None
+    if "modelDescription.xml" not in names:
+        held = ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
+        raise FmuFileError(f"{path} is not an FMU: no modelDescription.xml in the zip archive "
+                           f"(it holds {held or 'nothing'})")
+
+
 @dataclass
 class ModelInfo:
     """What the master needs of a modelDescription.xml."""
@@ -57,9 +89,15 @@ class ModelInfo:
         path = Path(path)
         if not path.exists():
             raise FileNotFoundError(f"FMU file not found: {path}")
-        md = read_model_description(str(path))
+        check_fmu_file(path)
+        try:
+            md = read_model_description(str(path))
+        except Exception as error:  # noqa: BLE001 - fmpy raises what lxml or its own checks raise
+            text = " | ".join(line.strip() for line in str(error).splitlines() if line.strip()) or type(error).__name__
+            raise FmuFileError(f"{path}: its modelDescription.xml cannot be read: {text}") from None
         if md.coSimulation is None:
-            raise ValueError(f"{path.name} is not a co-simulation FMU")
+            raise FmuFileError(f"{path} is not a co-simulation FMU (its modelDescription.xml declares no "
+                               "<CoSimulation>)")
         if md.fmiVersion.startswith("3"):
             for v in md.modelVariables:  # the FMI 2.0 type names the harness checks
                 v.type = FMI3_TYPE_NAMES.get(v.type, v.type)
@@ -255,4 +293,4 @@ class Component:
         raise FmiError(self.name, function, status, time, list(self.log))
 
 
-__all__ = ["BoundArrayCall", "Component", "FmiError", "ModelInfo"]
+__all__ = ["BoundArrayCall", "Component", "FmiError", "FmuFileError", "ModelInfo", "check_fmu_file"]

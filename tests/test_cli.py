@@ -13,11 +13,20 @@ process, and stop before any long run.
 from __future__ import annotations
 
 import argparse
+import copy
+import functools
+import json
 import zipfile
 
 import pytest
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
 from harness import cli, cli_args
+from harness import scenario as scenarios
 
 NUMERIC_TYPES = {cli_args.positive_float: True, cli_args.positive_int: True,
                  cli_args.non_negative_float: False, cli_args.non_negative_int: False}  # type -> zero is bad
@@ -242,6 +251,87 @@ def test_the_last_resort_handler_turns_any_exception_into_one_line(monkeypatch, 
     assert cli.main(["run", "pendulum_case1"]) == 1
     line = _one_error_line(capsys.readouterr().err)
     assert "something internal" in line and "with a second line" in line
+
+
+# ------------------------------------------------ scenario-file mutations
+def toml_text(data: dict) -> str:
+    """A scenario's data as TOML: every top-level key with an inline value (tomllib reads it back equal)."""
+    def value(item):
+        if isinstance(item, bool):
+            return "true" if item else "false"
+        if isinstance(item, (int, float)):
+            return repr(item)
+        if isinstance(item, str):
+            return json.dumps(item)
+        if isinstance(item, list):
+            return "[" + ", ".join(value(x) for x in item) + "]"
+        return "{ " + ", ".join(f"{json.dumps(k)} = {value(v)}" for k, v in item.items()) + " }"
+    return "".join(f"{json.dumps(key)} = {value(item)}\n" for key, item in data.items())
+
+
+def key_paths(data, path=()):
+    """(path, value) of every key of the file, tables and arrays of tables included, and of every
+    element of an array of strings (its path ends with the element's index)."""
+    items = data.items() if isinstance(data, dict) else enumerate(data)
+    for key, item in items:
+        yield (*path, key), item
+        if isinstance(item, dict) or (isinstance(item, list) and all(isinstance(x, (dict, str)) for x in item)):
+            yield from key_paths(item, (*path, key))
+
+
+def misspelt(name: str) -> str:
+    return name[:2] + name[3:] if len(name) >= 4 else name + name[-1]
+
+
+def wrong_type(value):
+    if isinstance(value, str):
+        return 5
+    return "text" if isinstance(value, (bool, int, float)) else 5
+
+
+def scenario_mutations() -> list:
+    """(id, data, the name the error line must hold): every key misspelt once, every value of the wrong type."""
+    original = tomllib.loads((scenarios.SCENARIO_DIR / "pendulum_case1.toml").read_text())
+    mutations = []
+    for path, item in key_paths(original):
+        *parents, last = path
+        shown = ".".join(map(str, path))
+        named = next(str(p) for p in reversed(path) if isinstance(p, str))  # an element is named by its array
+        data = copy.deepcopy(original)
+        parent = functools.reduce(lambda table, key: table[key], parents, data)
+        parent[last] = wrong_type(item)
+        mutations.append((f"{shown} of the wrong type", data, named))
+        if isinstance(last, str):
+            data = copy.deepcopy(original)
+            parent = functools.reduce(lambda table, key: table[key], parents, data)
+            renamed = {(misspelt(k) if k == last else k): v for k, v in parent.items()}
+            parent.clear()
+            parent.update(renamed)
+            mutations.append((f"{shown} misspelt", data, misspelt(last)))
+    return mutations
+
+
+def test_every_scenario_key_misspelt_and_every_value_of_the_wrong_type_is_one_line_and_exit_2(fmu_paths, tmp_path,
+                                                                                                 capsys):
+    """Issue 23, item 1: a scenario file is checked as strictly as the command line."""
+    mutations = scenario_mutations()
+    assert len(mutations) > 150  # every key of pendulum_case1.toml twice, every recorded name once
+    failures = []
+    for number, (case_id, data, name) in enumerate(mutations):
+        path = tmp_path / f"mutant_{number}.toml"
+        path.write_text(toml_text(data))
+        assert tomllib.loads(path.read_text()) == data
+        code = cli.main(["run", str(path), "--stop", "0.01"])
+        captured = capsys.readouterr()
+        try:
+            assert "Traceback" not in captured.out + captured.err
+            assert code == 2, f"exit {code}"
+            line = _one_error_line(captured.err)
+            assert str(path) in line, f"the file is not named: {line}"
+            assert name in line, f"{name!r} not named: {line}"
+        except AssertionError as error:
+            failures.append(f"{case_id}: {error}")
+    assert not failures, f"{len(failures)} of {len(mutations)}:\n" + "\n".join(failures)
 
 
 # ------------------------------------------------ warnings, --apply, outputs

@@ -135,7 +135,8 @@ def test_divergence_keeps_the_partial_result_in_the_exception(fmu_paths):
      "unknown FMU 'NoSuchModel'; valid: AdaptiveFuzzyController, DcMotorArm, InvertedPendulum"),
     (lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "missing/Reference.fmu"'), "FMU file not found"),
     (lambda t: t.replace('from = "plant.y"', 'from = "plnt.y"'),
-     "unknown instance 'plnt'; valid: plant, reference, controller"),
+     "[[connections]] 1: from = 'plnt.y': unknown instance 'plnt' (did you mean 'plant'?); valid: plant, reference, "
+     "controller"),
     (lambda t: t.replace('from = "plant.y"', 'from = "plant.angle"'),
      "plant has no variable 'angle'; valid outputs: y, dy, d"),
     (lambda t: t.replace('to = "reference.y"', 'to = "reference.e"'),
