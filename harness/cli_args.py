@@ -11,6 +11,7 @@ The types are plain functions for ``add_argument(type=...)``: argparse reports t
 from __future__ import annotations
 
 import argparse
+import difflib
 import math
 import re
 import shutil
@@ -32,12 +33,79 @@ class UsageError(ValueError):
     """A mistake on the command line that argparse's types cannot see alone (exit status 2)."""
 
 
+#: what a command line means by a negative number, also in scientific notation (argparse alone reads
+#: "-1e-4" as an option and says "expected one argument"): a value, which the option's type then refuses
+NEGATIVE_NUMBER = re.compile(r"^-(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?$|^-(?:inf|infinity|nan)$", re.IGNORECASE)
+
+
+def close_match(word: str, choices) -> str | None:
+    """The choice closest to a misspelt ``word`` (difflib's ratio >= 0.6), or None."""
+    found = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return found[0] if found else None
+
+
+def _unknown_option(arguments, known) -> str | None:
+    """The first of ``arguments`` that looks like a long option and is none of ``known`` (nor an
+    abbreviation of one), without its ``=value``."""
+    for argument in arguments:
+        if argument == "--":
+            return None
+        option = argument.split("=", 1)[0]
+        if option.startswith("--") and len(option) > 2 and not any(o.startswith(option) for o in known):
+            return option
+    return None
+
+
 class OneLineParser(argparse.ArgumentParser):
-    """argparse with one line per usage error (no usage block), exit status 2."""
+    """argparse with one line per usage error (no usage block), exit status 2; a negative number in
+    any notation is a value; a misspelt option or choice gets its close match ("did you mean
+    --controller?": Python's argparse before 3.14 suggests nothing)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER  # read by argparse's option parsing (3.10-3.13)
 
     def error(self, message):
+        """Exit 2 with one line; a misspelt option is named first (it is why a required option or
+        argument seems missing)."""
+        leaf = not any(isinstance(action, argparse._SubParsersAction) for action in self._actions)
+        unknown = _unknown_option(getattr(self, "_arguments", ()), self._long_options()) if leaf else None
+        if unknown is not None and not message.startswith("unrecognized option"):
+            message = self._unrecognized(unknown, self._long_options())
         hint = f" (see {self.prog} --help)"
         self.exit(USAGE_EXIT, f"{self.prog}: error: {message}{hint}\n")
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._arguments = list(sys.argv[1:] if args is None else args)
+        namespace, extras = super().parse_known_args(args, namespace)
+        known = self._long_options(namespace)
+        unknown = _unknown_option(extras, known)
+        if unknown is not None:
+            self.error(self._unrecognized(unknown, known))
+        return namespace, extras
+
+    @staticmethod
+    def _unrecognized(option: str, known: list) -> str:
+        match = close_match(option, known)
+        return f"unrecognized option {option}" + (f"; did you mean {match}?" if match else f"; valid: {', '.join(known)}")
+
+    def _long_options(self, namespace=None) -> list:
+        """The long options of this parser and of the subcommand chosen (argparse hands a
+        subcommand's unknown options up to its parent in some versions)."""
+        options = [o for o in self._option_string_actions if o.startswith("--")]
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction) and namespace is not None:
+                chosen = action.choices.get(getattr(namespace, action.dest, None) or "")
+                if chosen is not None:
+                    options += [o for o in chosen._option_string_actions if o.startswith("--")]
+        return sorted(set(options) - {"--help"}) + ["--help"]
+
+    def _check_value(self, action, value):
+        if action.choices is not None and value not in action.choices:
+            match = close_match(str(value), [str(c) for c in action.choices])
+            hint = f"; did you mean {match!r}?" if match else ""
+            raise argparse.ArgumentError(action, f"invalid choice: {value!r}{hint} (choose from "
+                                                 f"{', '.join(map(repr, action.choices))})")
 
 
 # ------------------------------------------------------------------ numbers

@@ -30,7 +30,7 @@ from harness import scenario as scenarios
 
 NUMERIC_TYPES = {cli_args.positive_float: True, cli_args.positive_int: True,
                  cli_args.non_negative_float: False, cli_args.non_negative_int: False}  # type -> zero is bad
-BAD_NUMBERS = ("abc", "nan", "inf", "-inf", "-1")
+BAD_NUMBERS = ("abc", "nan", "inf", "-inf", "-1", "-1e-4")  # "-1e-4": a value, not an option (issue 23)
 
 
 def subparsers() -> dict:
@@ -164,6 +164,7 @@ def test_every_bad_argument_of_every_subcommand_is_one_line_and_exit_2(files, no
             assert code == 2, f"exit {code}"
             line = _one_error_line(captured.err)
             assert expected in line, f"{expected!r} not in {line!r}"
+            assert "expected one argument" not in line, "a negative number was read as an option"
         except AssertionError as error:
             failures.append(f"{case_id}: {argv}: {error}")
     assert not failures, "\n".join(failures)
@@ -227,7 +228,8 @@ def test_mistakes_a_command_finds_are_one_line_with_the_right_status(case_id, ar
 def test_fmi3_fmus_are_refused_where_ssp_engines_take_them(command, monkeypatch, capsys):
     argv = [command, "pendulum_case1"] if command != "hosts" else [command]
     assert cli.main([*argv, "--edition", "native3"]) == 2
-    assert "invalid choice: 'native3' (choose from 'python', 'native')" in _one_error_line(capsys.readouterr().err)
+    assert "invalid choice: 'native3'; did you mean 'native'? (choose from 'python', 'native')" in \
+        _one_error_line(capsys.readouterr().err)
     monkeypatch.setenv("AFC_EDITION", "native3")
     assert cli.main(argv) == 2
     assert _one_error_line(capsys.readouterr().err) == (
@@ -251,6 +253,48 @@ def test_the_last_resort_handler_turns_any_exception_into_one_line(monkeypatch, 
     assert cli.main(["run", "pendulum_case1"]) == 1
     line = _one_error_line(capsys.readouterr().err)
     assert "something internal" in line and "with a second line" in line
+
+
+def misspelt_option(option: str) -> str:
+    """--controller -> --contoller: one letter of the name left out (the issue's example)."""
+    name = option[2:]
+    return "--" + name[:5] + name[6:] if len(name) > 6 else "--" + name[:1] + name[2:]
+
+
+def test_a_misspelt_option_or_choice_gets_its_close_match(no_handler, capsys):
+    """Issue 23, item 3: "--contoller" said only "unrecognized arguments"; argparse before 3.14 suggests nothing."""
+    assert cli.main(["run", "pendulum_case1", "--contoller", "vud"]) == 2
+    assert _one_error_line(capsys.readouterr().err) == (
+        "python -m harness run: error: unrecognized option --contoller; did you mean --controller? "
+        "(see python -m harness run --help)")
+    failures, tried = [], 0
+    for name, parser in subparsers().items():
+        options = [o for a in parser._actions for o in a.option_strings if o.startswith("--") and o != "--help"]
+        for option in options:
+            wrong = misspelt_option(option)
+            if any(o.startswith(wrong) for o in options):  # an abbreviation argparse accepts
+                continue
+            tried += 1
+            code = cli.main([name, wrong])
+            line = _one_error_line(capsys.readouterr().err)
+            if code != 2 or f"unrecognized option {wrong}; did you mean {option}?" not in line:
+                failures.append(f"{name} {wrong}: {line}")
+    assert not failures and tried > 50, "\n".join(failures)
+    assert cli.main(["tabels"]) == 2
+    assert "invalid choice: 'tabels'; did you mean 'tables'? (choose from 'run', 'tables'," in capsys.readouterr().err
+    assert cli.main(["run", "pendulum_case1", "--controller", "vdu"]) == 2
+    assert "invalid choice: 'vdu'; did you mean 'vud'? (choose from 'vud', 'fixed', 'fae')" in capsys.readouterr().err
+    assert cli.main(["run", "pendulum_case1", "--zzz"]) == 2
+    assert "unrecognized option --zzz; valid: --algorithm, --controller, --edition, " in capsys.readouterr().err
+
+
+def test_a_negative_number_in_any_notation_is_a_value_refused_with_the_valid_range(no_handler, capsys):
+    """Issue 23, item 3: "--step -1e-4" was read as an option ("expected one argument")."""
+    for value in ("-1e-4", "-1E+3", "-.5", "-2.", "-inf", "-Infinity", "-nan"):
+        assert cli.main(["run", "pendulum_case1", "--step", value]) == 2
+        line = _one_error_line(capsys.readouterr().err)
+        assert line.startswith(f"python -m harness run: error: argument --step: ") and "give a finite number > 0" in line, \
+            line
 
 
 # ------------------------------------------------ scenario-file mutations

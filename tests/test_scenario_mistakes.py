@@ -3,7 +3,11 @@
 Name mistakes already in tests/test_master.py are not repeated here."""
 from __future__ import annotations
 
+import zipfile
+
 import pytest
+
+import build_fmu
 
 from harness import scenario as scenarios
 from harness.cli import main as cli_main
@@ -67,3 +71,39 @@ def test_a_bad_step_or_stop_on_the_command_line_is_one_clear_error(fmu_paths, ca
     err = capsys.readouterr().err
     assert err.count("error:") == 1 and "Traceback" not in err, err
     assert ("step" if option == "--step" else "stop") in err.split("error:")[1]
+
+
+# ------------------------------------------------------------ files that are not FMUs
+def _zip(path, members: dict):
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, text in members.items():
+            archive.writestr(name, text)
+
+
+BAD_FMU_FILES = [  # (what, make(path), the error's tail after "[components.reference] fmu = 'bad.fmu': <path>")
+    ("an empty file", lambda p: p.write_bytes(b""),
+     " is empty (0 bytes), not an FMU (an FMU is a zip archive holding modelDescription.xml)"),
+    ("a text file", lambda p: p.write_text("not an FMU\n"),
+     " is not an FMU: not a zip archive (11 bytes; an FMU is a zip archive holding modelDescription.xml)"),
+    ("a truncated FMU", lambda p: p.write_bytes((build_fmu.ROOT / "build/fmus/TrackingReference.fmu").read_bytes()[:3000]),
+     " is not an FMU: a truncated or damaged zip archive (3000 bytes; an FMU is a zip archive holding "
+     "modelDescription.xml)"),
+    ("a zip without a model description", lambda p: _zip(p, {"binaries/readme.txt": "x", "other.xml": "<a/>"}),
+     " is not an FMU: no modelDescription.xml in the zip archive (it holds binaries/readme.txt, other.xml)"),
+    ("a model description that is not XML", lambda p: _zip(p, {"modelDescription.xml": "not < xml"}),
+     ": its modelDescription.xml cannot be read: "),
+    ("a folder", lambda p: p.mkdir(), " is a folder, not an FMU file"),
+]
+
+
+@pytest.mark.parametrize("what,make,tail", BAD_FMU_FILES, ids=[case[0] for case in BAD_FMU_FILES])
+def test_a_file_that_is_not_an_fmu_is_named_with_what_it_is(fmu_paths, tmp_path, capsys, what, make, tail):
+    """Issue 23, item 3: these gave "File is not a zip file" or a raw KeyError."""
+    make(tmp_path / "bad.fmu")
+    path = edited_scenario(tmp_path, lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "bad.fmu"'))
+    assert cli_main(["run", str(path), "--stop", "0.01"]) == 2, what
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith(f"error: {path}: [components.reference] fmu = 'bad.fmu': {tmp_path / 'bad.fmu'}{tail}"), \
+        lines[0]
