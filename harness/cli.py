@@ -16,21 +16,21 @@ from c_toolchain import NativeBuildError
 
 from . import cli_args, variants
 from . import scenario as scenarios
+from .cases import Progress
 from .hosts import bench, engines, matrix, ssp
 from .master import ALGORITHMS, SimulationFailed, simulate
-from .scores import SCORE_KEYS, score_run
+from .scores import SCORE_KEYS, score_run, value_text, why_none
 from .studies import mutation, regression, step_study, sweep, tables
 
 
-def _progress_bar(total: int, description: str, enabled: bool):
+def _progress(total: int, description: str, enabled: bool):
+    """(callback for the master, close): a bar on a terminal, lines on stderr elsewhere (cases.Progress)."""
     if not enabled:
         return None, lambda: None
-    from tqdm import tqdm  # here, not at module level: 0.1-0.3 s of import that --help and --json runs skip
-
-    bar = tqdm(total=total, desc=description, unit="step", unit_scale=True, leave=False, file=sys.stderr)
+    bar = Progress(total, description, unit="step", unit_scale=True, leave=False)
 
     def update(done, _total):
-        bar.update(done - bar.n)
+        bar.update(done - bar.done)
 
     return update, bar.close
 
@@ -38,8 +38,7 @@ def _progress_bar(total: int, description: str, enabled: bool):
 def run_command(args) -> int:
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
     cli_args.check_output_interval(args.output_interval, scenario.step)
-    progress, close = _progress_bar(scenario.steps, f"{scenario.name}/{args.controller}",
-                                    enabled=not args.json and sys.stderr.isatty())
+    progress, close = _progress(scenario.steps, f"{scenario.name}/{args.controller}", enabled=not args.json)
     for note in scenario.notes:  # e.g. the stop moved to a whole number of steps
         print(f"note: {note}", file=sys.stderr)
     try:
@@ -61,17 +60,20 @@ def run_command(args) -> int:
     scores = score_run(result)
     summary = {"scenario": scenario.name, "controller": args.controller, "step": scenario.step,
                **scores, "wall_s": result.wall_s, "us_per_step": result.us_per_step}
+    undefined = {key: why_none(key, scenario.start, scenario.stop) for key in SCORE_KEYS if scores[key] is None}
     if args.json:
-        if cli_args.short_horizon_note(scenario):
-            summary["warnings"] = [f"es1_pct, es2_pct{cli_args.short_horizon_note(scenario)}"]
+        if undefined:  # each null score with its reason
+            summary["warnings"] = [f"{key} {value_text(key, None, scenario.start, scenario.stop)}: {reason}"
+                                   for key, reason in undefined.items()]
         print(json.dumps(summary))
     else:
         print(f"{scenario.name} / {args.controller} ({args.algorithm}), step {scenario.step:g} s, "
               f"{result.rows - 1} steps in {result.wall_s:.2f} s ({result.us_per_step:.1f} us/step)")
-        short = cli_args.short_horizon_note(scenario)
         for key in SCORE_KEYS:
-            note = short if key in cli_args.PERIOD_SCORES and short else ""
-            print(f"  {key:8s} {'n/a' if note else format(scores[key], '.6g')}{note}")
+            text = value_text(key, scores[key], scenario.start, scenario.stop)
+            if key in undefined:
+                text += f" ({undefined[key]})"
+            print(f"  {key:8s} {text}")
         if args.out:
             print(f"  result   {args.out}")
     return 0

@@ -281,16 +281,6 @@ def refuse_tracked(paths, option: str = "--out"):
 
 
 # ------------------------------------------------- consistency and warnings
-PERIOD_SCORES = ("es1_pct", "es2_pct")  # taken over the last reference period [T - 2 pi, T]
-
-
-def short_horizon_note(configured) -> str:
-    """A word for es1/es2 when the run is shorter than the reference period they are taken over."""
-    if configured.stop - configured.start < 2 * math.pi - 1e-9:
-        return " (stop < 2 pi: the last reference period they are taken over is not there)"
-    return ""
-
-
 def check_output_interval(interval, step: float):
     """An output interval must be a whole multiple of the communication step."""
     if interval is None:

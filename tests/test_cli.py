@@ -382,7 +382,9 @@ def test_every_scenario_key_misspelt_and_every_value_of_the_wrong_type_is_one_li
 def test_es1_es2_are_marked_n_a_on_a_horizon_shorter_than_the_reference_period(fmu_paths, capsys):
     assert cli.main(["run", "pendulum_case1", "--stop", "0.5"]) == 0
     short = capsys.readouterr().out
-    assert "es1_pct  n/a (stop < 2 pi" in short and "es2_pct  n/a (stop < 2 pi" in short
+    assert "es1_pct  n/a (the horizon 0.5 s is shorter than the reference period, 2 pi s, over which es1 and es2 " \
+           "are taken)" in short and "es2_pct  n/a (the horizon 0.5 s" in short
+    assert "ts       not settled (|e| is outside the 5 % band of max|ym| at the stop time 0.5 s" in short
     assert cli.main(["run", "pendulum_case1", "--stop", "6.4", "--step", "1e-3"]) == 0
     long = capsys.readouterr().out
     assert "n/a" not in long and float(long.split("es1_pct")[1].split()[0]) > 0

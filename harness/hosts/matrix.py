@@ -592,7 +592,7 @@ def matrix_markdown(matrix: dict) -> str:
              "*scenario* is the scenario's own step (Table I/II). Warnings are the FMU's log messages with status "
              "Warning, and where the host gives them to us.", "",
              "```bash",
-             "pip install -e '.[hosts]'      # libcosimpy and fmu-manipulation-toolbox (ecospy, fmpy: always)",
+             "pip install -e '.[hosts]'      # ecospy, tbb, libcosimpy, fmu-manipulation-toolbox (fmpy: always)",
              "python -m harness hosts pendulum_case1 manipulator --stop manipulator=5   # results/hosts/",
              "python -m harness hosts --host ecos libcosim-api --steps validated --apply  # also docs/hosts.md",
              "```", ""]
