@@ -158,7 +158,8 @@ def default_jobs() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-#: without a terminal (CI logs, ``| tee``, ``| cat``): at most one line per finished item this often ...
+#: without a terminal (CI logs, ``| tee``, ``| cat``): nothing for a command shorter than this, then at
+#: most one line per finished item this often ...
 PROGRESS_LINE_EVERY_S = 5.0
 #: ... and one this often while nothing finishes, so a long run never looks hung
 PROGRESS_HEARTBEAT_S = 30.0
@@ -166,15 +167,16 @@ PROGRESS_HEARTBEAT_S = 30.0
 
 class Progress:
     """How a long command says how far it is, on stderr: tqdm's bar on a terminal; elsewhere, where no
-    bar can be drawn, plain lines: one at the start, one per finished item (at most every
-    PROGRESS_LINE_EVERY_S), one every PROGRESS_HEARTBEAT_S while nothing finishes, one at the end.
+    bar can be drawn, plain lines: none for a command done within PROGRESS_LINE_EVERY_S (a short
+    run stays quiet, its error alone on stderr), then one per finished item at most every
+    PROGRESS_LINE_EVERY_S, one every PROGRESS_HEARTBEAT_S while nothing finishes, and one at the end.
     ``enabled=False``: silent.  ``bar``: force the bar (True) or the lines (False)."""
 
     def __init__(self, total: int, description: str, unit: str = "run", enabled: bool = True, initial: int = 0,
                  stream=None, bar: bool | None = None, **tqdm_options):
         self.stream = stream or sys.stderr
         self.total, self.description, self.unit = total, description, unit
-        self.done, self.label = initial, ""
+        self.done, self.label, self.printed = initial, "", False
         self.started = self.last_line = clock.perf_counter()
         terminal = self.stream.isatty() if bar is None else bar
         self.mode = "off" if not enabled else "bar" if terminal else "lines"
@@ -187,7 +189,6 @@ class Progress:
             self._bar = tqdm(total=total, initial=initial, desc=description, unit=unit, file=self.stream,
                              **tqdm_options)
         elif self.mode == "lines":
-            self._line(f"{self.done}/{total} {unit}s done, started")
             self._heartbeat = threading.Thread(target=self._beat, daemon=True)
             self._heartbeat.start()
 
@@ -209,12 +210,14 @@ class Progress:
             self.label = ", ".join(f"{key} {value}" for key, value in values.items())
 
     def close(self) -> None:
+        """Stop (and say where it ended, if it said anything); closing twice is harmless."""
         if self._bar is not None:
             self._bar.close()
         elif self.mode == "lines" and not self._stopped.is_set():
             self._stopped.set()
             self._heartbeat.join()
-            self._line(self._status(final=True))
+            if self.printed:
+                self._line(self._status(final=True))
         self._stopped.set()
 
     def _status(self, final: bool = False) -> str:
@@ -227,12 +230,15 @@ class Progress:
     def _beat(self):
         while not self._stopped.wait(min(PROGRESS_HEARTBEAT_S, 1.0)):
             if clock.perf_counter() - self.last_line >= PROGRESS_HEARTBEAT_S:
-                self._line(self._status() + ", still running")
+                try:
+                    self._line(self._status() + ", still running")
+                except (ValueError, OSError):  # the stream was closed under us: nothing more to say
+                    return
 
     def _line(self, text: str):
         with self._lock:
             print(f"{self.description}: {text}", file=self.stream, flush=True)
-            self.last_line = clock.perf_counter()
+            self.last_line, self.printed = clock.perf_counter(), True
 
     def __enter__(self):
         return self

@@ -49,7 +49,8 @@ def run_command(args) -> int:
             failure.result.write_csv(args.out, args.output_interval)
             print(f"partial result ({failure.result.rows} rows) written to {args.out}")
         return cli_args.report(failure)
-    close()
+    finally:
+        close()  # also when the scenario is refused before the first step
     if scenario.path is not None and scenario.path.parent == scenarios.SCENARIO_DIR:  # one the study covers
         # after the run: a failed run says one line, its error
         warning = step_study.step_warning(scenario.name, args.controller, args.algorithm, scenario.step)
