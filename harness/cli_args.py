@@ -87,7 +87,8 @@ class OneLineParser(argparse.ArgumentParser):
     @staticmethod
     def _unrecognized(option: str, known: list) -> str:
         match = close_match(option, known)
-        return f"unrecognized option {option}" + (f"; did you mean {match}?" if match else f"; valid: {', '.join(known)}")
+        hint = f"; did you mean {match}?" if match else f"; valid: {', '.join(known)}"
+        return f"unrecognized option {option}{hint}"
 
     def _long_options(self, namespace=None) -> list:
         """The long options of this parser and of the subcommand chosen (argparse hands a

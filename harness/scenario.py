@@ -238,6 +238,7 @@ def load(name_or_path) -> Scenario:
 # against it and docs/master.md's table of scenario keys is generated from it (keys_markdown()).
 
 ANY_INSTANCE, ANY_PARAMETER, ANY_SIGNAL = "INSTANCE", "PARAMETER", "INSTANCE.VARIABLE"  # names the user chooses
+CHOSEN_NAMES = (ANY_INSTANCE, ANY_PARAMETER, ANY_SIGNAL)
 
 
 def _is_number(value) -> bool:
@@ -346,8 +347,8 @@ def _check_table(data: dict, table: str, dotted: str, shown: str, where: str):
     """Check one table of the file against SCHEMA (``table``: its schema name, e.g.
     ``components.INSTANCE``; ``dotted``: its name in the file; ``shown``: how messages name it)."""
     keys = [key for key in SCHEMA if key.table == table]
-    named = {key.name: key for key in keys if key.name not in (ANY_INSTANCE, ANY_PARAMETER, ANY_SIGNAL)}
-    chosen = next((key for key in keys if key.name in (ANY_INSTANCE, ANY_PARAMETER, ANY_SIGNAL)), None)
+    named = {key.name: key for key in keys if key.name not in CHOSEN_NAMES}
+    chosen = next((key for key in keys if key.name in CHOSEN_NAMES), None)
     prefix = f"{where}: {shown} " if shown else f"{where}: "
     for name, value in data.items():
         key = named.get(name, chosen)
@@ -415,7 +416,7 @@ def parse(data: dict, path: Path | None = None) -> Scenario:
         path=path,
     )
     try:
-        scenario.steps  # at least one step, and a record that fits in memory
+        _ = scenario.steps  # at least one step, and a record that fits in memory
     except ScenarioError as error:
         raise ScenarioError(f"{where}: [experiment] {error}") from None
     return scenario

@@ -79,7 +79,8 @@ def test_the_contents_page_lists_every_page_and_the_readme_links_the_contents():
 
 
 def test_no_page_cites_the_projects_working_notes():
-    """A "SPEC" citation points outside the repository: cite the docs/model.md section it means."""
+    """A citation of the working notes (their spec file) points outside the repository: cite the
+    docs/model.md section it means."""
     for document in _markdown_files():
         for number, line in enumerate(document.read_text().splitlines(), 1):
             assert not re.search(r"\bSPEC\b", line), f"{document.relative_to(ROOT)}:{number}: {line.strip()}"
