@@ -103,8 +103,8 @@ BARE_SCRIPT = textwrap.dedent("""
 
 WARM_UP, RSS_CYCLES, TRACED_CYCLES, EVERY = 40, 300, 150, 10
 # pythonfmu 0.7's residual with our FMUs (5 or 6 MRO entries), traced memory per cycle:
-# 0.82 - 0.88 KiB over 1000 cycles, 0.95 - 1.1 KiB over this test's 150 (fmpy's own 0.08
-# KiB included; fmpy with a native FMU: 0.003).  Before the fix: 2.0 - 2.7 KiB over 1000
+# 0.82 - 0.88 KiB over 1000 cycles, 0.95 - 1.1 KiB over this test's 150 (the same host with
+# a native FMU: 0.003 KiB, so fmpy itself keeps nothing).  Before the fix: 2.0 - 2.7 KiB over 1000
 # cycles, 2.2 - 3.0 over 150.  The RSS slope over a short window sees less (the leaked
 # objects first fill free slots of the allocator's pools): after the fix 0 - 0.4 KiB over
 # 300 cycles, 0.45 - 0.85 from cycle 1000 to 3000; before 1.5 - 2.1 over 300 cycles,
