@@ -81,7 +81,8 @@ int model_compute_outputs(ModelInstance *m) {
 #define SLIP_BACKWARD (-1.0)
 #define STICK 0.0
 #define SLIP_FORWARD 1.0
-#define ZERO_VELOCITY 1e-10 /* rad/s: z_slip = mode x2 + ZERO_VELOCITY */
+#define ZERO_VELOCITY 1e-10   /* rad/s: z_slip = mode x2 + ZERO_VELOCITY */
+#define TORQUE_TOLERANCE 1e-9 /* N.m: break-away once |F| >= cr - TORQUE_TOLERANCE */
 
 /* F = u - mr(t) gv lr cos x1: the torque on the link at rest besides friction (38, 39) */
 static double manipulator_applied_torque(double t, double x1, double u, const double *params) {
@@ -92,14 +93,19 @@ static double manipulator_applied_torque(double t, double x1, double u, const do
 
 /* the mode at rest: stuck while |F| < cr, else slipping in the direction of F */
 static double manipulator_rest_mode(double force, double cr) {
-    if (fabs(force) < cr) return STICK;
+    if (fabs(force) < cr - TORQUE_TOLERANCE) return STICK;
     return force >= 0.0 ? SLIP_FORWARD : SLIP_BACKWARD;
+}
+
+/* a slipping link has not come to rest: z_slip > ZERO_VELOCITY / 2 */
+static int manipulator_still_slipping(double x2, double mode) {
+    return mode * x2 + ZERO_VELOCITY > 0.5 * ZERO_VELOCITY;
 }
 
 /* the friction mode after an event (or at the initial state, from mode = STICK) */
 static double manipulator_friction_mode(double t, double x1, double x2, double u, const double *params, double mode) {
     if (mode != STICK) {
-        if (mode * x2 + ZERO_VELOCITY > 0.0) return mode; /* z_slip > 0: still slipping */
+        if (manipulator_still_slipping(x2, mode)) return mode;
     } else if (x2 != 0.0) {
         return x2 > 0.0 ? SLIP_FORWARD : SLIP_BACKWARD;
     }
@@ -109,7 +115,7 @@ static double manipulator_friction_mode(double t, double x1, double x2, double u
 /* (mode, x2) after an event: x2 = 0 where a slipping link came to rest */
 static double manipulator_event_update(double t, double x1, double *x2, double u, const double *params, double mode) {
     double new_mode = manipulator_friction_mode(t, x1, *x2, u, params, mode);
-    if (mode != STICK && !(mode * *x2 + ZERO_VELOCITY > 0.0)) *x2 = 0.0;
+    if (mode != STICK && !manipulator_still_slipping(*x2, mode)) *x2 = 0.0;
     return new_mode;
 }
 

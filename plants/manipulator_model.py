@@ -122,8 +122,14 @@ SLIP_FORWARD = 1
 #: rad/s: the slip indicator is z_slip = mode x2 + ZERO_VELOCITY, so that it starts strictly
 #: positive when slipping begins at x2 = 0 (every host sees its later sign change) and the
 #: event fires once x2 has crossed zero by this much (the wrong Coulomb sign acts for
-#: ZERO_VELOCITY / |dx2|, about 1e-11 s at the paper's parameters).
+#: ZERO_VELOCITY / |dx2|, about 1e-11 s at the paper's parameters).  The event update counts
+#: the link as come to rest once z_slip < ZERO_VELOCITY / 2: a host whose root finder stops a
+#: hair before the crossing (z_slip = +1e-15) still gets the mode change, not the same event again.
 ZERO_VELOCITY = 1e-10
+#: N.m: the link breaks away once |F| is within this of cr (z_stick <= TORQUE_TOLERANCE), and
+#: sticks only where |F| < cr - TORQUE_TOLERANCE (so z_stick starts > 0): the same margin for
+#: the break-away event located a hair early.
+TORQUE_TOLERANCE = 1e-9
 
 
 def manipulator_applied_torque(t: float, x1: float, u: float, params: tuple) -> float:
@@ -141,11 +147,16 @@ def manipulator_rest_mode(force: float, cr: float) -> int:
     friction can hold it, |F| < cr; else slipping in the direction of F (forwards at F = 0,
     which only cr = 0 lets through: then the Coulomb term is 0 and the sign does not matter).
 
-    Strict, so that z_stick = cr - |F| is > 0 when the link sticks and its crossing of zero
-    (break-away) is a sign change every host sees."""
-    if abs(force) < cr:
+    With the margin TORQUE_TOLERANCE, so that z_stick = cr - |F| is > 0 when the link sticks and
+    its crossing of zero (break-away) is a sign change every host sees."""
+    if abs(force) < cr - TORQUE_TOLERANCE:
         return STICK
     return SLIP_FORWARD if force >= 0.0 else SLIP_BACKWARD
+
+
+def manipulator_still_slipping(x2: float, mode: int) -> bool:
+    """A slipping link has not come to rest: z_slip = mode x2 + ZERO_VELOCITY > ZERO_VELOCITY / 2."""
+    return mode * x2 + ZERO_VELOCITY > 0.5 * ZERO_VELOCITY
 
 
 def manipulator_friction_mode(t: float, x1: float, x2: float, u: float, params: tuple, mode: int) -> int:
@@ -157,7 +168,7 @@ def manipulator_friction_mode(t: float, x1: float, x2: float, u: float, params: 
     of x2; with x2 = 0 the rest mode decides (break-away when |F| reaches cr).
     """
     if mode != STICK:
-        if mode * x2 + ZERO_VELOCITY > 0.0:  # z_slip > 0
+        if manipulator_still_slipping(x2, mode):
             return mode
     elif x2 != 0.0:
         return SLIP_FORWARD if x2 > 0.0 else SLIP_BACKWARD
@@ -168,7 +179,7 @@ def manipulator_event_update(t: float, x1: float, x2: float, u: float, params: t
     """(mode, x2) after an event: the new friction mode (:func:`manipulator_friction_mode`) and
     the rate, set to 0 where a slipping link came to rest (its slip indicator reached zero)."""
     new_mode = manipulator_friction_mode(t, x1, x2, u, params, mode)
-    if mode != STICK and not mode * x2 + ZERO_VELOCITY > 0.0:
+    if mode != STICK and not manipulator_still_slipping(x2, mode):
         x2 = 0.0
     return new_mode, x2
 
