@@ -207,7 +207,7 @@ def fmpy_simulate(path: Path, folder: Path, stop: float, outputs, inputs=None, s
     result = folder / "out.csv"
     command = [sys.executable, "-m", "fmpy", "simulate", str(path), "--interface-type", "ModelExchange",
                "--stop-time", repr(stop), "--relative-tolerance", repr(rtol), "--output-interval", repr(interval),
-               "--output-file", str(result), "--output-variables", *outputs]
+               "--output-file", str(result), "--timeout", "120", "--output-variables", *outputs]
     if inputs is not None:
         names, times, rows = inputs
         command += ["--input-file", str(me.input_csv(folder / "in.csv", names, times, rows, stop))]
