@@ -13,9 +13,9 @@
  * a message naming the call and the state.  Model errors (invalid parameters, NaN
  * inputs, divergence) are returned as Error, never Fatal, and leave the instance usable:
  * the host may correct a parameter and exit initialisation again, or free the instance.
- * Every function of the API is exported; those this FMU does not support (model
- * exchange, derivatives, events, clocks, types it has no variables of) return Error
- * with a log message.
+ * Every function of the API is exported; those this FMU does not support (directional
+ * derivatives, clocks, scheduled execution, types it has no variables of, the other
+ * interface's calls) return Error with a log message.  Model exchange: docs/model_exchange.md.
  */
 #include <float.h>
 #include <math.h>

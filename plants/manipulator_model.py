@@ -122,7 +122,7 @@ SLIP_FORWARD = 1
 #: rad/s: the slip indicator is z_slip = mode x2 + ZERO_VELOCITY, so that it starts strictly
 #: positive when slipping begins at x2 = 0 (every host sees its later sign change) and the
 #: event fires once x2 has crossed zero by this much (the wrong Coulomb sign acts for
-#: ZERO_VELOCITY / |dx2|, about 1e-11 s at the paper's parameters).  The event update counts
+#: ZERO_VELOCITY / |dx2|, some 1e-11 s at the paper's parameters).  The event update counts
 #: the link as come to rest once z_slip < ZERO_VELOCITY / 2: a host whose root finder stops a
 #: hair before the crossing (z_slip = +1e-15) still gets the mode change, not the same event again.
 ZERO_VELOCITY = 1e-10
