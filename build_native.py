@@ -277,8 +277,14 @@ def fmi3_description(fmi2_root: ET.Element) -> ET.Element:
                 element.set("dependencies", " ".join(references[i] for i in unknown.get("dependencies").split()))
             if unknown.get("dependenciesKind") is not None:
                 element.set("dependenciesKind", unknown.get("dependenciesKind"))
+    vrs = {scalar.get("name"): scalar.get("valueReference") for scalar in fmi2_root.find("ModelVariables")}
+    declared = {e.name: e for e in model_exchange(cosim2.get("modelIdentifier")).event_indicators}
     for indicator in _event_indicator_elements(fmi2_root):
-        ET.SubElement(structure, "EventIndicator", valueReference=indicator.get("valueReference"))
+        element = ET.SubElement(structure, "EventIndicator", valueReference=indicator.get("valueReference"))
+        pairs = sorted((int(vrs[known]), kind) for known, kind in declared[indicator.get("name")].depends_on)
+        element.set("dependencies", " ".join(str(vr) for vr, _ in pairs))
+        if pairs:
+            element.set("dependenciesKind", " ".join(kind for _, kind in pairs))
     return root
 
 
@@ -326,7 +332,6 @@ class ModelExchange:
                 + [name for name, _ in self.locals])
 
 
-_AT_REST = "while slipping; cr - |F| while stuck"
 MODEL_EXCHANGE = {
     "InvertedPendulum": ModelExchange(
         derivatives=(Derivative("y", (("dy", "constant"),), (), "dx1 = x2 (37)"),

@@ -680,8 +680,11 @@ def test_the_model_structure_declares_the_table_s_dependencies(native, fmu_paths
         assert unknown.variable.name == f"der({derivative.state})"
         declared = sorted(derivative.depends_on)
         assert sorted(zip((d.name for d in unknown.dependencies), unknown.dependenciesKind)) == declared
-    if edition == "native3":
+    if edition == "native3":  # FMI 3.0 declares the event indicators and their dependencies
         assert [u.variable.name for u in md.eventIndicators] == [e.name for e in declaration.event_indicators]
+        for unknown, indicator in zip(md.eventIndicators, declaration.event_indicators):
+            assert sorted(zip((d.name for d in unknown.dependencies), unknown.dependenciesKind or [])) == sorted(
+                indicator.depends_on)
 
 
 def _perturbed(value, variable):
@@ -691,40 +694,56 @@ def _perturbed(value, variable):
     return float(value) * (1.0 + 1e-3) + 1e-3
 
 
+def _moves(fmu, declared, x, inputs) -> dict:
+    """Perturb each state (from x) and each input: {unknown: the knowns it moved with}."""
+    unknowns = sorted(declared)
+    fmu.set_states(x)
+    fmu.set(**inputs)
+    base = dict(zip(unknowns, fmu.get(*unknowns))) if len(unknowns) > 1 else {unknowns[0]: fmu.get(unknowns[0])}
+    moved = {}
+    for k, state in enumerate(fmu.md_states):
+        fmu.set_states(x + np.eye(fmu.nx)[k] * (1e-3 + 1e-3 * abs(x[k])))
+        for name, value in zip(unknowns, fmu.get(*unknowns)):
+            if value != base[name]:
+                moved.setdefault(name, set()).add(state)
+    fmu.set_states(x)
+    for known, value in inputs.items():
+        fmu.set(**{known: value * 1.001 + 1e-3})
+        for name, now in zip(unknowns, fmu.get(*unknowns)):
+            if now != base[name]:
+                moved.setdefault(name, set()).add(known)
+        fmu.set(**{known: value})
+    return moved
+
+
 @pytest.mark.parametrize("version", VERSIONS)
 @pytest.mark.parametrize("model", MODELS)
 def test_every_numerical_dependency_is_declared_in_continuous_time(native, model, version):
-    """Perturb each state and input of a model exchange instance: every output or derivative that
-    moves must declare that known (the declarations may be wider, never narrower)."""
+    """Perturb each state and input of a model exchange instance: every output, derivative or (FMI 3.0)
+    event indicator that moves must declare that known (the declarations may be wider, never narrower);
+    the manipulator slipping and stuck."""
     parameters, inputs, _ = RUNS[model]
     fmu = instance(native, model, version)
     try:
         fmu.initialize(**parameters, **inputs(0.3))
         fmu.set_time(0.3)
-        declared = {u.variable.name: set(_names(u)) for u in (*fmu.md.outputs, *fmu.md.derivatives)}
-        unknowns = sorted(declared)
+        fmu.md_states = [d.state for d in build_native.model_exchange(model).derivatives]
+        declared = {u.variable.name: set(_names(u))
+                    for u in (*fmu.md.outputs, *fmu.md.derivatives, *fmu.md.eventIndicators)}  # (FMI 3.0's)
         x = fmu.states() + np.linspace(0.1, 0.3, fmu.nx)  # away from the start values (thetas unequal)
-        fmu.set_states(x)
-        base = dict(zip(unknowns, fmu.get(*unknowns))) if len(unknowns) > 1 else {unknowns[0]: fmu.get(unknowns[0])}
-        states = [d.state for d in build_native.model_exchange(model).derivatives]
-        moved = 0
-        for k, state in enumerate(states):
-            fmu.set_states(x + np.eye(fmu.nx)[k] * (1e-3 + 1e-3 * abs(x[k])))
-            now = dict(zip(unknowns, fmu.get(*unknowns)))
-            for name in unknowns:
-                if now[name] != base[name]:
-                    moved += 1
-                    assert state in declared[name] or name == state, f"{name} moves with the state {state}"
-        fmu.set_states(x)
-        for name, value in inputs(0.3).items():
-            fmu.set(**{name: value * 1.001 + 1e-3})
-            now = dict(zip(unknowns, fmu.get(*unknowns)))
-            for unknown in unknowns:
-                if now[unknown] != base[unknown]:
-                    moved += 1
-                    assert name in declared[unknown], f"{unknown} moves with the input {name}"
-            fmu.set(**{name: value})
-        assert moved > 0
+        situations = [_moves(fmu, declared, x, inputs(0.3))]
+        if model == "Manipulator":  # x2 crossed zero with |F| < cr: stuck
+            fmu.set(u=0.7)
+            fmu.set_states([x[0], -1e-3])
+            fmu.event()
+            assert fmu.get("friction_mode") == 0.0
+            situations.append(_moves(fmu, declared, fmu.states(), {"u": 0.7}))
+            if version == 3:
+                assert situations[-1]["z_stick"] == {"y", "u"}  # cr - |F|: what FMI 3.0 declares
+        for moved in situations:
+            assert moved
+            for name, knowns in moved.items():
+                assert knowns - {name} <= declared[name], f"{name} moves with {sorted(knowns - declared[name])}"
     finally:
         fmu.free()
 
