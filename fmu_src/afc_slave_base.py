@@ -77,6 +77,12 @@ class Variable:
     exclusive_minimum: bool = False  # True: the value must be > minimum
     exclusive_maximum: bool = False  # True: the value must be < maximum
     depends_on: tuple[str, ...] = ()  # outputs: inputs with direct feedthrough
+    # outputs: the dependenciesKind of each entry of depends_on ("constant": a constant factor,
+    # "dependent": no particular structure, ...); () leaves it undeclared (FMI: dependent)
+    dependency_kinds: tuple[str, ...] = ()
+    # outputs: what the output's value in initialization mode depends on (parameters and inputs:
+    # the knowns of FMI's InitialUnknowns); None: every parameter and depends_on (conservative)
+    initial_depends_on: tuple[str, ...] | None = None
 
     def valid_range(self) -> str:
         """The valid range as text, e.g. ``(0, 1)``, ``> 0``, ``{1, 2, 3}``."""
@@ -119,6 +125,32 @@ def non_negative(name, start, unit="", description=""):
 def finite(name, start, unit="", description=""):
     """A Real parameter that may take any finite value."""
     return Variable(name, PARAMETER, start, unit, description)
+
+
+def initial_dependencies(variables, variable: Variable) -> tuple:
+    """The knowns (parameters, inputs) of ``variable``'s value in initialization mode, in table order:
+    its ``initial_depends_on``, or every parameter and its ``depends_on`` when that is None."""
+    if variable.initial_depends_on is not None:
+        names = set(variable.initial_depends_on)
+    else:
+        names = {v.name for v in variables if v.causality == PARAMETER} | set(variable.depends_on)
+    known = {v.name for v in variables if v.causality in (PARAMETER, INPUT)}
+    if not names <= known:
+        raise ValueError(f"{variable.name}: initial dependencies {sorted(names - known)} are not parameters or inputs")
+    return tuple(v.name for v in variables if v.name in names)
+
+
+def _unknown(parent, index: int, dependencies, kinds=()) -> Element:
+    """An FMI 2.0 <Unknown> with its dependencies ordered by index (as FMI 2.0 requires), and
+    their dependenciesKind when declared."""
+    if kinds and len(kinds) != len(dependencies):
+        raise ValueError(f"Unknown {index}: {len(kinds)} dependency kinds for {len(dependencies)} dependencies")
+    order = sorted(range(len(dependencies)), key=lambda i: dependencies[i])
+    element = SubElement(parent, "Unknown", index=str(index),
+                         dependencies=" ".join(str(dependencies[i]) for i in order))
+    if kinds:
+        element.set("dependenciesKind", " ".join(kinds[i] for i in order))
+    return element
 
 
 class FmuModelError(RuntimeError):
@@ -360,11 +392,12 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
                 unknown_dependencies = [n for n in v.depends_on if n not in index]
                 if unknown_dependencies:
                     raise ValueError(f"{v.name} depends on unknown {unknown_dependencies}")
-                SubElement(outputs_node, "Unknown", index=str(index[v.name]),
-                           dependencies=" ".join(str(index[n]) for n in v.depends_on))
+                _unknown(outputs_node, index[v.name], [index[n] for n in v.depends_on], v.dependency_kinds)
+            # InitialUnknowns: the outputs' values in initialization mode and what they depend on
+            # (parameters, inputs): a plant's y(0) depends on x1_start, not on u
             initial_node = SubElement(structure, "InitialUnknowns")
             for v in outputs:
-                SubElement(initial_node, "Unknown", index=str(index[v.name]))
+                _unknown(initial_node, index[v.name], [index[n] for n in initial_dependencies(self.VARIABLES, v)])
         return root
 
     # ---------------------------------------------------------- life cycle
