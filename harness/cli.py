@@ -87,9 +87,10 @@ def register_run(commands):
 def _subcommand_registrations():
     """Each subcommand lives in its own module with a ``register(commands)`` function."""
     from . import bench, engines, hosts, mutation, regression, report_tables, ssp, step_study, sweep
+    from .studies import tune
 
     return [register_run, report_tables.register, step_study.register, sweep.register, regression.register,
-            ssp.register, engines.register, bench.register, mutation.register, hosts.register]
+            ssp.register, engines.register, bench.register, mutation.register, hosts.register, tune.register]
 
 
 def build_parser() -> argparse.ArgumentParser:
