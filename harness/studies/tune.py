@@ -195,6 +195,22 @@ def search_space(variant: int, order: int, table: dict | None = None, only=None,
     return dimensions
 
 
+def search_space_markdown(table: dict | None = None) -> str:
+    """The table of docs/tuning.md: every declared search range (tests/test_tune.py keeps the page current)."""
+    table = declared_parameters() if table is None else table
+    names = {number: name for name, number in scenarios.CONTROLLER_VARIANTS.items()}
+    lines = ["| parameter | default | valid range | searched | acts in | from order |", "|---|---|---|---|---|---|"]
+    for name, variable in table.items():
+        tuning = variable.tuning
+        if tuning is None:
+            continue
+        dimension = Dimension(name, tuning.low, tuning.high, tuning.scale)
+        acts = ", ".join(names[v] for v in tuning.variants) if tuning.variants else "every controller"
+        lines.append(f"| `{name}` | {variable.start:.6g} | {variable.valid_range()} | {dimension.describe()} | "
+                     f"{acts} | {tuning.order} |")
+    return "\n".join(lines)
+
+
 def hurwitz_bound(i: int, k) -> float:
     """The supremum of k_i that keeps s^n + k1 s^(n-1) + ... + kn Hurwitz, given k1..k(i-1) > 0.
 
@@ -744,6 +760,13 @@ def open_study(prepared: Prepared, storage):
             study.enqueue_trial(start, user_attrs={"start": True}, skip_if_exists=False)
             return study
     study = optuna.load_study(study_name=name, storage=storage)
+    check_signature(study, prepared)
+    return study
+
+
+def check_signature(study, prepared: Prepared) -> None:
+    """A TuneError unless the existing ``study`` was made with ``prepared``'s settings (reads only)."""
+    name = prepared.study_name
     for _ in range(100):  # a study another process is creating gets its signature within moments
         stored = study.user_attrs.get("signature")
         if stored is not None:
@@ -757,7 +780,24 @@ def open_study(prepared: Prepared, storage):
         raise TuneError(f"study {name!r} in {prepared.storage_url} was made with other settings: "
                         f"{'; '.join(differences)}; resume it with its settings or name another study with "
                         "--study NAME")
-    return study
+
+
+def check_existing(prepared: Prepared) -> None:
+    """Before a run of several studies: an existing study of the same name must have the same settings
+    (an SQLite file that is not there yet is not created here)."""
+    import optuna
+
+    url = prepared.storage_url
+    if url.startswith("sqlite:///"):
+        path = url[len("sqlite:///"):]
+        if path != ":memory:" and not Path(path).exists():
+            return
+    storage = open_storage(url)
+    try:
+        storage.get_study_id_from_name(prepared.study_name)
+    except KeyError:
+        return
+    check_signature(optuna.load_study(study_name=prepared.study_name, storage=storage), prepared)
 
 
 def _pid_alive(pid) -> bool:
@@ -1464,34 +1504,67 @@ def beats(rows: list, which: str, key: str, first: str, second: str) -> dict:
 
 
 def comparison_markdown(comparison: dict) -> str:
+    seeds = comparison["seeds"]
+    key = comparison["objective"]
     lines = ["## The paper's comparison under equal tuning effort", "",
-             f"Every controller tuned with the same budget ({comparison['trials']} trials, seed "
-             f"{comparison['seed']}, sampler {comparison['sampler']}, objective {comparison['objective']}) over the "
-             "same search space where they share parameters (lambda_ce and kappa_i act in vud only, gamma_w in fae "
-             "only: the FMU's table). Trial 0 of every study is the scenario's own parameters (the paper's "
-             "values). Each value is at the scenario's step h, +- the error estimate |f(h) - (2 f(h/2) - f(h))| "
-             "from the re-run at half the step (Richardson, as in the step study).", ""]
+             f"Every controller tuned with the same budget ({comparison['trials']} trials per study, sampler "
+             f"{comparison['sampler']}, objective {key}) over the same search space where they share parameters "
+             "(lambda_ce and kappa_i act in vud only, gamma_w in fae only: the FMU's table), "
+             f"{len(seeds)} time(s) with seeds {', '.join(map(str, seeds))}: an optimiser's result varies with "
+             "its seed, and that spread is part of the answer. Trial 0 of every study is the scenario's own "
+             "parameters (the paper's values). Each value is at the scenario's step h, +- the estimated "
+             "numerical error |f(h) - (2 f(h/2) - f(h))| from the re-run at half the step (Richardson, as in the "
+             "step study).", ""]
+
+    def cell(entry, score):
+        if not entry:
+            return "n/a"
+        error = (entry.get("error") or {}).get(score)
+        return _g(entry["scores"][score], 5) + (f" +- {error:.2g}" if error is not None else "")
+
     for scenario, block in comparison["scenarios"].items():
-        key = comparison["objective"]
-        lines += [f"### {scenario}", "", f"| controller | {key}, paper's parameters | {key}, tuned | Ec, tuned | "
-                  "TV(u)/s, tuned | umax, tuned | finished trials (pruned) |", "|---|---|---|---|---|---|---|"]
-        for row in block["rows"]:
-            start, best = row.get("start"), row.get("best")
-
-            def cell(entry, score):
-                if not entry:
-                    return "n/a"
-                error = (entry.get("error") or {}).get(score)
-                return _g(entry["scores"][score], 5) + (f" +- {error:.2g}" if error is not None else "")
-
-            pruned = sum(v for k, v in row["counts"].items() if k not in ("ok", "surplus", "lost"))
-            lines.append(f"| {row['controller']} | {cell(start, key)} | {cell(best, key)} | {cell(best, 'Ec')} | "
-                         f"{cell(best, 'tv_u')} | {cell(best, 'umax')} | {row['finished']} ({pruned}) |")
+        lines += [f"### {scenario}", "", f"| controller | seed | {key}, paper's parameters | {key}, tuned | "
+                  "Ec, tuned | TV(u)/s, tuned | umax, tuned | best trial | finished trials (pruned) |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for repeat in block["repeats"]:
+            for row in repeat["rows"]:
+                start, best = row.get("start"), row.get("best")
+                pruned = sum(v for k, v in row["counts"].items() if k not in ("ok", "surplus", "lost"))
+                lines.append(f"| {row['controller']} | {repeat['seed']} | {cell(start, key)} | {cell(best, key)} | "
+                             f"{cell(best, 'Ec')} | {cell(best, 'tv_u')} | {cell(best, 'umax')} | "
+                             f"{'#' + str(best['number']) if best else 'n/a'} | {row['finished']} ({pruned}) |")
         lines.append("")
-        for verdict in block["verdicts"]:
+        for repeat in block["repeats"]:
+            for verdict in repeat["verdicts"]:
+                lines.append(f"- seed {repeat['seed']}: **{verdict['question']}** {verdict['answer']}")
+        for verdict in block.get("overall", ()):
             lines.append(f"- **{verdict['question']}** {verdict['answer']}")
         lines.append("")
     return "\n".join(lines)
+
+
+def overall_verdicts(scenario_name: str, order: int, repeats: list, key: str) -> list:
+    """The claims over every seed: in how many repetitions does each answer come out?"""
+    found = []
+    count = len(repeats)
+    if scenario_name.startswith("pendulum"):
+        winners = [smallest(r["rows"], "best", key) for r in repeats]
+        vud = sum(w["controller"] == "vud" for w in winners)
+        apart = sum(w["controller"] == "vud" and w["separated"] for w in winners)
+        others = ", ".join(f"{w['controller']} (seed {r['seed']})" for w, r in zip(winners, repeats)
+                           if w["controller"] != "vud")
+        found.append({"question": f"Over all seeds: does vud give the smallest {key} on the pendulum when every "
+                                  "controller is tuned?",
+                      "answer": f"in {vud} of {count} repetition(s) ({apart} apart beyond the numerical errors)"
+                                + (f"; otherwise {others}" if others else "") + "."})
+    if order >= 3:
+        answers = [beats(r["rows"], "best", key, "fae", "vud")["answer"] for r in repeats]
+        yes = sum(a == "yes" for a in answers)
+        no = sum(a == "no" for a in answers)
+        found.append({"question": f"Over all seeds: does fae beat vud on the third-order plant when both are tuned?",
+                      "answer": f"yes in {yes}, no in {no}, undecided in {count - yes - no} of {count} "
+                                "repetition(s)."})
+    return found
 
 
 def verdicts_for(scenario_name: str, order: int, rows: list, key: str) -> list:
@@ -1552,7 +1625,10 @@ def write_report(out: Path) -> Path:
              "pruned and counted, never reported as best.", ""]
     comparison_path = out / "comparison.json"
     if comparison_path.exists():
-        parts.append(comparison_markdown(json.loads(comparison_path.read_text())))
+        try:
+            parts.append(comparison_markdown(json.loads(comparison_path.read_text())))
+        except (KeyError, TypeError, ValueError) as error:  # written by another version of this module
+            parts.append(f"(comparison.json not shown: {cli_args.one_line(error)}; run `tune --compare` again)\n")
     for summary in summaries:
         parts.append(study_markdown(summary, out))
     path = out / "report.md"
@@ -1629,7 +1705,49 @@ def bench(args) -> int:
     return 0
 
 
+def compare_command(args, out: Path, log) -> int:
+    """``--compare``: vud, fixed and fae tuned with the same budget on each scenario, ``--repeats`` seeds."""
+    controllers = tuple(scenarios.CONTROLLER_VARIANTS)
+    objective = score_name(args.objective)
+    seeds = [args.seed + r for r in range(args.repeats)]
+    plan = []
+    for name in args.scenarios:
+        scenario_name = scenarios.load(name).name
+        for seed in seeds:
+            for controller in controllers:
+                config = _config_from(args, name, controller, out)
+                config.seed = seed
+                if seed != seeds[0]:  # the first repetition is the study a plain `tune` makes
+                    config.study = f"{scenario_name}-{controller}-{objective}-seed{seed}"
+                plan.append((scenario_name, seed, config))
+    for _, _, config in plan:  # every usage error (and a study of the same name made otherwise) before any trial
+        check_existing(prepare(copy.copy(config)))
+    summaries = [(scenario_name, seed, tune(config, log)) for scenario_name, seed, config in plan]
+    comparison = {"trials": args.trials, "seeds": seeds, "sampler": args.sampler, "objective": objective,
+                  "scenarios": {}}
+    for name in args.scenarios:
+        scenario = scenarios.load(name)
+        order = int(scenario.components[scenario.controller_instance].parameters.get("order", 2))
+        repeats = []
+        for seed in seeds:
+            rows = compare_rows([s for n, sd, s in summaries if n == scenario.name and sd == seed])
+            repeats.append({"seed": seed, "rows": rows,
+                            "verdicts": verdicts_for(scenario.name, order, rows, objective)})
+        comparison["scenarios"][scenario.name] = {
+            "order": order, "repeats": repeats,
+            "overall": overall_verdicts(scenario.name, order, repeats, objective) if len(seeds) > 1 else []}
+    (out / "comparison.json").write_text(json.dumps(comparison, indent=1, default=str))
+    report = write_report(out)
+    print(comparison_markdown(comparison))
+    print(f"report: {report}")
+    return 0
+
+
 def tune_command(args) -> int:
+    try:
+        import optuna  # noqa: F401
+    except ImportError:
+        raise TuneError("tune needs Optuna: pip install -e '.[tune]' (optuna, optuna-dashboard, cmaes)") from None
     log = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
     if args.bench:
         if len(args.scenarios) != 1 or args.compare:
@@ -1642,26 +1760,9 @@ def tune_command(args) -> int:
     if args.compare:
         if args.study:
             raise TuneError("--compare names its studies itself: drop --study")
-        controllers = tuple(scenarios.CONTROLLER_VARIANTS)
-        configs = [_config_from(args, name, controller, out) for name in args.scenarios for controller in controllers]
-        for config in configs:  # every usage error before the first trial
-            prepare(copy.copy(config))
-        summaries = []
-        for config in configs:
-            summaries.append(tune(config, log))
-        comparison = {"trials": args.trials, "seed": args.seed, "sampler": args.sampler,
-                      "objective": configs[0].objective, "scenarios": {}}
-        for name in args.scenarios:
-            rows = compare_rows([s for s in summaries if s["scenario"] == scenarios.load(name).name])
-            scenario = scenarios.load(name)
-            order = int(scenario.components[scenario.controller_instance].parameters.get("order", 2))
-            comparison["scenarios"][scenario.name] = {"rows": rows, "verdicts": verdicts_for(
-                scenario.name, order, rows, configs[0].objective)}
-        (out / "comparison.json").write_text(json.dumps(comparison, indent=1, default=str))
-        report = write_report(out)
-        print(comparison_markdown(comparison))
-        print(f"report: {report}")
-        return 0
+        return compare_command(args, out, log)
+    if args.repeats != 1:
+        raise TuneError("--repeats is for --compare")
     config = _config_from(args, args.scenarios[0], args.controller, out)
     summary = tune(config, log)
     best = summary.get("best")
@@ -1765,6 +1866,8 @@ def register(commands):
     command.add_argument("--compare", action="store_true",
                          help="the equal-effort comparison: tune vud, fixed and fae on each SCENARIO with the same "
                               "budget and report the paper's claims re-checked")
+    command.add_argument("--repeats", type=cli_args.positive_int, default=1,
+                         help="--compare: run every study with this many seeds (SEED, SEED+1, ...; default 1)")
     command.add_argument("--bench", action="store_true",
                          help="time the study in a scratch database (no outputs): trials per second")
     command.add_argument("--out", default=str(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT}/)")
