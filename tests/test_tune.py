@@ -347,3 +347,21 @@ def test_two_processes_drive_one_study_to_exactly_its_budget(tmp_path, edition, 
     finished = [t for t in trials if t.state in (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)]
     assert len(finished) == 16 and len({t.number for t in trials}) == len(trials)
     assert sum(bool(t.user_attrs.get("start")) for t in trials) == 1
+
+
+def test_the_docs_page_shows_the_declared_search_space_and_its_tune_commands_parse():
+    import re
+    import shlex
+
+    from harness.cli import build_parser
+
+    text = (ROOT / "docs" / "tuning.md").read_text()
+    block = text.split("<!-- search space: begin -->\n")[1].split("\n<!-- search space: end -->")[0]
+    assert block == tune.search_space_markdown(), "docs/tuning.md: paste tune.search_space_markdown()"
+    parser = build_parser()
+    commands = re.findall(r"(?m)^python -m harness (tune [^#\n]*?)\s*(?:#.*)?$", text)
+    commands += re.findall(r"`python -m harness (tune [^`]*)`", text)
+    commands = [c for c in commands if ".toml" not in c]
+    assert len(commands) >= 2
+    for command in commands:
+        parser.parse_args(shlex.split(command))

@@ -669,8 +669,10 @@ def prepare(config: TuneConfig) -> Prepared:
     held_out = tuple(config.held_out) if config.held_out is not None else HELD_OUT.get(scenario.name, ())
     for name in held_out:
         scenarios.load(name)
-    study_name = config.study or "-".join([scenario.name, config.controller, objective] +
-                                          (["robust"] if len(grid) > 1 else []))
+    study_name = config.study or "-".join(
+        [scenario.name, config.controller, objective]
+        + [f"{c.score}{'le' if c.operator == '<=' else 'ge'}{c.limit:g}" for c in constraints]
+        + (["robust"] if len(grid) > 1 else []))
     storage_url = config.storage or f"sqlite:///{Path(config.out) / scenario.name}.db"
     signature = {"scenario": scenario.name, "scenario_digest": _digest(scenario), "controller": config.controller,
                  "objective": objective, "constraints": sorted(c.text for c in constraints),
@@ -1623,6 +1625,19 @@ def write_report(out: Path) -> Path:
              "best value was re-run at half the communication step; candidates that diverged, failed, made u "
              "chatter (the controller FMU's warning) or moved by more than the tolerance at half the step are "
              "pruned and counted, never reported as best.", ""]
+    order = list(scenarios.CONTROLLER_VARIANTS)
+    summaries.sort(key=lambda m: (m["scenario"], m["seed"], order.index(m["controller"])
+                                  if m["controller"] in order else 9, m["study"]))
+    if summaries:
+        parts += ["| study | seed | trials (pruned) | best | start | scenario file |", "|---|---|---|---|---|---|"]
+        for m in summaries:
+            best, start = m.get("best"), m.get("start")
+            pruned = sum(v for k, v in m["counts"].items() if k not in ("ok", "surplus", "lost"))
+            parts.append(f"| [`{m['study']}`](#study-{m['study'].lower()}) | {m['seed']} | {m['finished']} ({pruned}) | "
+                         f"{m['objective']} {_g(best['value'], 5) if best else 'n/a'} | "
+                         f"{_g(start['value'], 5) if start else 'n/a'} | "
+                         f"{'`' + Path(m['study_file']).name + '`' if m.get('study_file') else 'none'} |")
+        parts.append("")
     comparison_path = out / "comparison.json"
     if comparison_path.exists():
         try:
@@ -1718,7 +1733,7 @@ def compare_command(args, out: Path, log) -> int:
                 config = _config_from(args, name, controller, out)
                 config.seed = seed
                 if seed != seeds[0]:  # the first repetition is the study a plain `tune` makes
-                    config.study = f"{scenario_name}-{controller}-{objective}-seed{seed}"
+                    config.study = f"{prepare(copy.copy(config)).study_name}-seed{seed}"
                 plan.append((scenario_name, seed, config))
     for _, _, config in plan:  # every usage error (and a study of the same name made otherwise) before any trial
         check_existing(prepare(copy.copy(config)))
@@ -1844,7 +1859,8 @@ def register(commands):
     command.add_argument("--storage", metavar="URL",
                          help="Optuna RDB storage URL (default sqlite:///OUT/SCENARIO.db); several tune "
                               "processes may share one")
-    command.add_argument("--study", metavar="NAME", help="study name (default SCENARIO-CONTROLLER-OBJECTIVE[-robust])")
+    command.add_argument("--study", metavar="NAME",
+                         help="study name (default SCENARIO-CONTROLLER-OBJECTIVE[-CONSTRAINTS][-robust])")
     command.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
     command.add_argument("--stop", type=cli_args.positive_float, help="stop time in s (default: the scenario's)")
     command.add_argument("--robust", action="store_true",
