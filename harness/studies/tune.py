@@ -74,6 +74,7 @@ VERIFY_TOLERANCE = 0.01  # a best candidate whose objective moves more at half t
 CHATTER_MARK = "u chatters"  # the controller FMU's chatter warning (fmu_src/chatter_monitor.py: warning)
 HEARTBEAT_S = 10  # a running trial's heartbeat (Optuna's RDB heartbeat)
 GRACE_S = 120  # a trial without heartbeat for this long belongs to a dead process: failed and retried
+ORPHAN_S = 15  # a RUNNING trial still without owner this long after it started: its process died
 SAMPLERS = ("tpe", "cmaes")
 STATUSES = ("ok", "diverged", "failed", "chatter", "step-dependent", "infeasible")
 # held-out scenarios for the tuned-vs-start comparison: the other pendulum cases (disturbance, heavy pole)
@@ -812,32 +813,52 @@ def _pid_alive(pid) -> bool:
     return True
 
 
-def recover_dead_trials(study, mine=()) -> list:
-    """RUNNING trials of a dead ``tune`` process on this host: failed, and enqueued again with the same
-    parameters (Optuna's retry: system attribute failed_trial); returns their numbers."""
+def _age_s(trial) -> float:
+    """Seconds since the trial started (Optuna stores local naive times)."""
+    import datetime
+
+    started = trial.datetime_start
+    return (datetime.datetime.now() - started).total_seconds() if started else math.inf
+
+
+def recover_dead_trials(study, mine=()) -> tuple:
+    """RUNNING trials of a dead ``tune`` process: failed, and enqueued again with the same parameters
+    (Optuna's retry: system attribute failed_trial).  Returns (their numbers, how many trials have no
+    owner yet but are younger than ORPHAN_S: a process claims its trial right after asking it).
+
+    A trial's owner (host, pid) is written right after it is asked; one of this host whose process is
+    gone is recovered at once, one without an owner once it is ORPHAN_S old (its process died between
+    the two writes), one of another host by the heartbeat's grace period (fail_stale_trials).
+    """
     import optuna
     from optuna.trial import TrialState
 
     host, me = socket.gethostname(), os.getpid()
     retry = optuna.storages.RetryHeartbeatStaleTrialCallback()
-    recovered = []
+    recovered, waiting = [], 0
     for trial in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
-        owner = trial.user_attrs.get("owner") or {}
-        if owner.get("host") != host or trial.number in mine:
+        if trial.number in mine:
             continue
-        if owner.get("pid") != me and _pid_alive(owner.get("pid")):
-            continue
+        owner = trial.user_attrs.get("owner")
+        if owner is None:
+            if _age_s(trial) < ORPHAN_S:
+                waiting += 1
+                continue
+            reason = "its process ended between asking for the trial and claiming it"
+        else:
+            if owner.get("host") != host or (owner.get("pid") != me and _pid_alive(owner.get("pid"))):
+                continue
+            reason = f"its process (pid {owner.get('pid')}) ended before the trial did"
         try:
             study._storage.set_trial_user_attr(trial._trial_id, "outcome", {
-                "status": "lost", "reason": f"its process (pid {owner.get('pid')}) ended before the trial did; "
-                                            "run again as a new trial"})
+                "status": "lost", "reason": f"{reason}; run again as a new trial"})
             if not study._storage.set_trial_state_values(trial._trial_id, state=TrialState.FAIL):
                 continue
         except optuna.exceptions.UpdateFinishedTrialError:
             continue
         retry(study, study._storage.get_trial(trial._trial_id))
         recovered.append(trial.number)
-    return recovered
+    return recovered, waiting
 
 
 class _Heartbeat:
@@ -977,8 +998,8 @@ def _ask(study, prepared: Prepared, heartbeat, owner: dict, x0, pending: list, l
     study.sampler = sampler_for(config.sampler, config.seed, count, x0)
     trial = study.ask()
     pending.append(trial)
+    trial.set_user_attr("owner", owner)  # claimed: recover_dead_trials knows whose it is
     heartbeat.add(trial._trial_id)
-    trial.set_user_attr("owner", owner)
     alive = sorted(t.number for t in study.get_trials(deepcopy=False) if t.state != TrialState.FAIL)
     if alive.index(trial.number) >= config.trials:  # other processes filled the budget meanwhile
         trial.set_user_attr("outcome", {"status": "surplus", "reason": "the study's budget was reached by other "
@@ -993,7 +1014,7 @@ def _ask(study, prepared: Prepared, heartbeat, owner: dict, x0, pending: list, l
         sample[dimension.name] = trial.suggest_float(dimension.name, low, high, log=log_scale)
     values = parameter_values(prepared.dimensions, sample, prepared.fixed)
     problem = paper_conditions({**prepared.fixed, **values}, prepared.table)
-    if problem:  # cannot happen inside the declared ranges but at the rounding edge of a Hurwitz fraction
+    if problem:  # a k3 kept fixed (--params) beyond the Routh bound of searched k1, k2; a fraction at its edge
         outcome = {"status": "infeasible", "reason": problem, "wall_s": 0.0}
         _tell(study, trial, values, outcome, prepared)
         pending.remove(trial)
@@ -1021,7 +1042,7 @@ def run_study(prepared: Prepared, study, log=None) -> dict:
     log = log or (lambda line: None)
     finished_states = (TrialState.COMPLETE, TrialState.PRUNED)
     heartbeat = _Heartbeat(study._storage)
-    recovered = recover_dead_trials(study)
+    recovered, _ = recover_dead_trials(study)
     if recovered:
         log(f"note: trials {', '.join(map(str, recovered))} of a killed run are run again (same parameters)")
     owner = {"host": socket.gethostname(), "pid": os.getpid()}
@@ -1046,7 +1067,17 @@ def run_study(prepared: Prepared, study, log=None) -> dict:
                 finished = sum(t.state in finished_states for t in trials)
                 running = sum(t.state == TrialState.RUNNING for t in trials)
                 if finished + running >= config.trials:
-                    break
+                    if in_flight:
+                        break
+                    mine = {trial.number for trial in pending}
+                    recovered, waiting = recover_dead_trials(study, mine)
+                    if recovered:
+                        log(f"note: trials {', '.join(map(str, recovered))} of a killed run are run again")
+                    elif waiting:  # a trial nobody has claimed yet: its process may have died right after asking
+                        clock.sleep(1.0)
+                    else:
+                        break
+                    continue
                 best = _best_of(trials)  # every process's: the verification threshold
                 asked = _ask(study, prepared, heartbeat, owner, x0, pending, log, best, len(trials))
                 if asked is None:
