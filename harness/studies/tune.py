@@ -59,7 +59,7 @@ import tempfile
 import threading
 import time as clock
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from .. import cli_args
@@ -557,8 +557,9 @@ def evaluate(task: dict) -> dict:
                                         "richardson": richardson(fine, outcome["scores"]),
                                         "error": error_estimates(fine, outcome["scores"])}
                 if change > task["tolerance"]:
+                    coarse = outcome["scores"][objective]
                     outcome.update(status="step-dependent",
-                                   reason=f"{objective} {outcome['scores'][objective]:.6g} at step {scenario.step:g} s, "
+                                   reason=f"{objective} {coarse:.6g} at step {scenario.step:g} s, "
                                           f"{fine[objective]:.6g} at half the step ({100 * change:.3g} % > "
                                           f"{100 * task['tolerance']:g} %)")
     outcome["wall_s"] = clock.perf_counter() - began
@@ -1334,6 +1335,8 @@ def summarize(prepared: Prepared, study, run_info: dict | None = None) -> dict:
     counts = {}
     for trial in trials:
         status = outcome_of(trial).get("status", trial.state.name.lower())
+        if trial.state == TrialState.COMPLETE and not is_feasible(trial):
+            status = "infeasible"  # complete, a constraint missed: kept for the sampler, never best
         counts[status] = counts.get(status, 0) + 1
     complete = [t for t in trials if t.state == TrialState.COMPLETE]
     best = best_trial(trials)
@@ -1368,6 +1371,7 @@ def summarize(prepared: Prepared, study, run_info: dict | None = None) -> dict:
         "space": [{"parameter": d.parameter, "name": d.name, "range": d.describe(),
                    "start": prepared.fixed[d.parameter]} for d in prepared.dimensions],
         "trials": len(trials), "finished": finished, "counts": counts, "span_s": span,
+        "states": {state: sum(t.state.name == state for t in trials) for state in ("COMPLETE", "PRUNED", "FAIL")},
         "run": run_info, "best": entry(best), "start": entry(start), "first_better": first_better,
         "best_so_far": best_so_far(trials),
         "trial_values": [(t.number, t.value) for t in complete],
@@ -1485,7 +1489,8 @@ def compare_rows(summaries: list) -> list:
     for summary in summaries:
         objective = summary["objective"]
         row = {"scenario": summary["scenario"], "controller": summary["controller"], "study": summary["study"],
-               "objective": objective, "finished": summary["finished"], "counts": summary["counts"]}
+               "objective": objective, "finished": summary["finished"], "counts": summary["counts"],
+               "states": summary.get("states", {})}
         for which in ("start", "best"):
             entry = summary.get(which)
             half = (entry or {}).get("half_step")
@@ -1541,7 +1546,9 @@ def comparison_markdown(comparison: dict) -> str:
     key = comparison["objective"]
     lines = ["## The paper's comparison under equal tuning effort", "",
              f"Every controller tuned with the same budget ({comparison['trials']} trials per study, sampler "
-             f"{comparison['sampler']}, objective {key}) over the same search space where they share parameters "
+             f"{comparison['sampler']}, objective {key}"
+             + (f", constraints {', '.join(comparison['constraints'])}" if comparison.get("constraints") else "")
+             + ") over the same search space where they share parameters "
              "(lambda_ce and kappa_i act in vud only, gamma_w in fae only: the FMU's table), "
              f"{len(seeds)} time(s) with seeds {', '.join(map(str, seeds))}: an optimiser's result varies with "
              "its seed, and that spread is part of the answer. Trial 0 of every study is the scenario's own "
@@ -1562,7 +1569,7 @@ def comparison_markdown(comparison: dict) -> str:
         for repeat in block["repeats"]:
             for row in repeat["rows"]:
                 start, best = row.get("start"), row.get("best")
-                pruned = sum(v for k, v in row["counts"].items() if k not in ("ok", "surplus", "lost"))
+                pruned = row.get("states", {}).get("PRUNED", 0)
                 lines.append(f"| {row['controller']} | {repeat['seed']} | {cell(start, key)} | {cell(best, key)} | "
                              f"{cell(best, 'Ec')} | {cell(best, 'tv_u')} | {cell(best, 'umax')} | "
                              f"{'#' + str(best['number']) if best else 'n/a'} | {row['finished']} ({pruned}) |")
@@ -1594,7 +1601,7 @@ def overall_verdicts(scenario_name: str, order: int, repeats: list, key: str) ->
         answers = [beats(r["rows"], "best", key, "fae", "vud")["answer"] for r in repeats]
         yes = sum(a == "yes" for a in answers)
         no = sum(a == "no" for a in answers)
-        found.append({"question": f"Over all seeds: does fae beat vud on the third-order plant when both are tuned?",
+        found.append({"question": "Over all seeds: does fae beat vud on the third-order plant when both are tuned?",
                       "answer": f"yes in {yes}, no in {no}, undecided in {count - yes - no} of {count} "
                                 "repetition(s)."})
     return found
@@ -1663,8 +1670,9 @@ def write_report(out: Path) -> Path:
         parts += ["| study | seed | trials (pruned) | best | start | scenario file |", "|---|---|---|---|---|---|"]
         for m in summaries:
             best, start = m.get("best"), m.get("start")
-            pruned = sum(v for k, v in m["counts"].items() if k not in ("ok", "surplus", "lost"))
-            parts.append(f"| [`{m['study']}`](#study-{m['study'].lower()}) | {m['seed']} | {m['finished']} ({pruned}) | "
+            pruned = m.get("states", {}).get("PRUNED", 0)
+            link = f"[`{m['study']}`](#study-{m['study'].lower()})"
+            parts.append(f"| {link} | {m['seed']} | {m['finished']} ({pruned}) | "
                          f"{m['objective']} {_g(best['value'], 5) if best else 'n/a'} | "
                          f"{_g(start['value'], 5) if start else 'n/a'} | "
                          f"{'`' + Path(m['study_file']).name + '`' if m.get('study_file') else 'none'} |")
@@ -1770,7 +1778,7 @@ def compare_command(args, out: Path, log) -> int:
         check_existing(prepare(copy.copy(config)))
     summaries = [(scenario_name, seed, tune(config, log)) for scenario_name, seed, config in plan]
     comparison = {"trials": args.trials, "seeds": seeds, "sampler": args.sampler, "objective": objective,
-                  "scenarios": {}}
+                  "constraints": [c.text for c in prepare(copy.copy(plan[0][2])).constraints], "scenarios": {}}
     for name in args.scenarios:
         scenario = scenarios.load(name)
         order = int(scenario.components[scenario.controller_instance].parameters.get("order", 2))
