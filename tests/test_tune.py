@@ -20,6 +20,7 @@ import pytest
 optuna = pytest.importorskip("optuna")
 
 import build_fmu  # noqa: E402
+import fmu_catalog  # noqa: E402
 from harness import scenario as scenarios  # noqa: E402
 from harness import variants  # noqa: E402
 from harness.cli import main as cli_main  # noqa: E402
@@ -203,18 +204,18 @@ def test_a_study_writes_a_scenario_that_run_and_regress_take_and_run_reproduces_
     assert cli_main(["run", str(toml), "--controller", "vud", "--edition", edition, "--json"]) == 0
     run = json.loads(capsys.readouterr().out)
     assert run["ITAE"] == best["value"] and run["Ec"] == best["scores"]["Ec"]
-    from harness import regression
+    from harness.studies import regression
     from harness.cases import Case
 
     monkeypatch.chdir(tmp_path.parent)  # a relative path with a folder, as `regress results/tune/X.toml` gets
     case = Case(f"{tmp_path.name}/{toml.name}", "vud")
     assert case.name == f"{toml.stem}_vud"
-    os.environ[build_fmu.EDITION_VARIABLE] = edition
+    os.environ[fmu_catalog.EDITION_VARIABLE] = edition
     try:
         first = regression.regress([case], update=True, report_dir=None, reference_dir=tmp_path / "refs", workers=1)
         again = regression.regress([case], report_dir=None, reference_dir=tmp_path / "refs", workers=1)
     finally:
-        os.environ.pop(build_fmu.EDITION_VARIABLE)
+        os.environ.pop(fmu_catalog.EDITION_VARIABLE)
     assert first.written and again.passed
     report = (tmp_path / "report.md").read_text()
     for heading in ("### Best parameters", "### Parameter importances", "held-out scenarios", "pendulum_case2"):

@@ -62,10 +62,18 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from .. import cli_args, variants
+import build_fmu
+import c_toolchain
+import fmu_catalog
+from fmu_src import afc_math
+from fmu_src.afc_slave_base import Tuning
+
+from .. import cli_args, master_loop, variants
 from .. import scenario as scenarios
-from ..cases import default_jobs, status_of
-from ..scores import SCORE_KEYS
+from ..cases import default_jobs, parallel_map, status_of
+from ..fmi import ModelInfo
+from ..master import Master, SimulationFailed, resolve_fmu
+from ..scores import SCORE_KEYS, score_run
 from . import step_study
 
 CONTROLLER_MODEL = "AdaptiveFuzzyController"
@@ -123,7 +131,6 @@ class Dimension:
 
 def declared_parameters() -> dict:
     """{name: Variable} of the controller FMU's parameters, from its declaration table."""
-    import build_fmu
 
     return {v.name: v for v in build_fmu.model_class(CONTROLLER_MODEL).VARIABLES if v.causality == "parameter"}
 
@@ -150,7 +157,6 @@ def search_space(variant: int, order: int, table: dict | None = None, only=None,
     A name the table does not know, one without a search range, one that does not act here, an
     empty or inverted range, or one leaving the valid range is a TuneError naming it.
     """
-    from fmu_src.afc_slave_base import Tuning
 
     table = declared_parameters() if table is None else table
     tunable = [name for name, v in table.items() if v.tuning is not None and _acts(v, variant, order)]
@@ -271,7 +277,6 @@ def paper_conditions(values: dict, table: dict) -> str | None:
     that P of (30) is positive definite (the FMU's own test: afc_math.lyapunov_p, is_positive_definite);
     the initial weights inside the projection bound, |theta0| <= M_theta (31).
     """
-    from fmu_src import afc_math
 
     for name, value in values.items():
         variable = table.get(name)
@@ -431,8 +436,6 @@ def prepared_fmus(scenario, fmu_paths: dict) -> dict:
 
     from fmpy import extract
 
-    from ..fmi import ModelInfo
-    from ..master import resolve_fmu
 
     if not _EXTRACTED:
         atexit.register(release_fmus)
@@ -478,8 +481,6 @@ def run_point(scenario, fmu_paths: dict) -> dict:
     ``chatter``: the run completed, but the controller FMU warned that u chatters (its own monitor,
     read from the FMU log the master keeps: ``Master.logs``).
     """
-    from ..master import Master, SimulationFailed
-    from ..scores import score_run
 
     began = clock.perf_counter()
     try:
@@ -626,8 +627,6 @@ def _digest(scenario) -> str:
 
 def prepare(config: TuneConfig) -> Prepared:
     """Check every input (TuneError names the culprit); nothing is written and no database is opened."""
-    from ..fmi import ModelInfo
-    from ..master import resolve_fmu
 
     if config.controller not in variants.NAMES:
         raise TuneError(f"unknown controller {config.controller!r}; valid: {', '.join(variants.NAMES)}")
@@ -642,7 +641,6 @@ def prepare(config: TuneConfig) -> Prepared:
     scenario = scenarios.configure(config.scenario, config.controller, stop=config.stop)
     fmu_paths = config.fmu_paths
     if fmu_paths is None:
-        import build_fmu
 
         fmu_paths = build_fmu.ensure_built(edition=config.edition)
     infos = {name: ModelInfo.read(resolve_fmu(spec.fmu, scenario, fmu_paths))
@@ -1050,7 +1048,6 @@ def run_study(prepared: Prepared, study, log=None) -> dict:
     owner = {"host": socket.gethostname(), "pid": os.getpid()}
     x0 = sample_of(prepared.dimensions, prepared.fixed) if config.sampler == "cmaes" else None
     if config.jobs > 1:
-        from .. import master_loop
 
         master_loop.library()  # the compiled loop, once, before the workers start
         executor = ProcessPoolExecutor(max_workers=config.jobs, mp_context=multiprocessing.get_context("spawn"),
@@ -1309,7 +1306,6 @@ def _figure_pareto(summary: dict, path: Path) -> None:
 
 def held_out_runs(prepared: Prepared, values: dict, pool_jobs: int) -> list:
     """The starting and the tuned controller on each held-out scenario (same stop as the tuning)."""
-    from ..cases import parallel_map
 
     tasks, labels = [], []
     for name in prepared.held_out:
@@ -1719,13 +1715,10 @@ def tune(config: TuneConfig, log=None, outputs: bool = True) -> dict:
 
 def default_edition() -> str:
     """$AFC_EDITION if set, else native when zig's C compiler is there to build it, else python."""
-    import build_fmu
-    import build_native
-
-    chosen = os.environ.get(build_fmu.EDITION_VARIABLE)
+    chosen = os.environ.get(fmu_catalog.EDITION_VARIABLE)
     if chosen:
         return chosen
-    return "native" if build_native.compiler_available() else "python"
+    return "native" if c_toolchain.compiler_available() else "python"
 
 
 def _config_from(args, scenario, controller: str, out: Path) -> TuneConfig:
