@@ -24,6 +24,7 @@ import threading
 import time as clock
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -58,7 +59,11 @@ class Case:
 
     @property
     def scenario_name(self) -> str:
-        return self.scenario.name if isinstance(self.scenario, scenarios.Scenario) else str(self.scenario)
+        """The scenario's name; for a .toml path, the file's stem (regress names reference files after it)."""
+        if isinstance(self.scenario, scenarios.Scenario):
+            return self.scenario.name
+        text = str(self.scenario)
+        return Path(text).stem if text.endswith(".toml") else text
 
     @property
     def name(self) -> str:
