@@ -174,6 +174,8 @@ def existing_study(tmp_path_factory, paths, edition):
     (["--range", "lambda_ce=0.5:1.5"], "1.5 is outside the valid range (0, 1) of lambda_ce"),
     (["--objective", "ITEA"], "unknown score 'ITEA'; valid: ts, es1_pct"),
     (["--constraint", "umx<=20"], "unknown score 'umx'"),
+    (["--objective", "es1"], "es1_pct is not defined on this run: the horizon 0.05 s is shorter than the reference"),
+    (["--constraint", "es2<=1"], "es2_pct is not defined on this run"),
     (["--constraint", "umax=20"], "write SCORE<=LIMIT or SCORE>=LIMIT"),
     (["--storage", "sqlite:////nonexistent-folder/x/y.db"], "cannot open the database"),
     (["--stop", "0.1"], "was made with other settings: stop = 0.05 (now 0.1)"),

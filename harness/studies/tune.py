@@ -73,7 +73,7 @@ from .. import scenario as scenarios
 from ..cases import default_jobs, parallel_map, status_of
 from ..fmi import ModelInfo
 from ..master import Master, SimulationFailed, resolve_fmu
-from ..scores import SCORE_KEYS, score_run
+from ..scores import REFERENCE_PERIOD, SCORE_KEYS, score_run, undefined_reason, value_text, why_none
 from . import step_study
 
 CONTROLLER_MODEL = "AdaptiveFuzzyController"
@@ -85,7 +85,7 @@ HEARTBEAT_S = 10  # a running trial's heartbeat (Optuna's RDB heartbeat)
 GRACE_S = 120  # a trial without heartbeat for this long belongs to a dead process: failed and retried
 ORPHAN_S = 15  # a RUNNING trial still without owner this long after it started: its process died
 SAMPLERS = ("tpe", "cmaes")
-STATUSES = ("ok", "diverged", "failed", "chatter", "step-dependent", "infeasible")
+STATUSES = ("ok", "diverged", "failed", "chatter", "step-dependent", "infeasible", "undefined")
 # held-out scenarios for the tuned-vs-start comparison: the other pendulum cases (disturbance, heavy pole)
 HELD_OUT = {"pendulum_case1": ("pendulum_case2", "pendulum_case3")}
 # --robust without --vary: the plant variations of each plant FMU (numbers, or xF: F times the scenario's value)
@@ -320,6 +320,8 @@ class Constraint:
     def violation(self, scores: dict) -> float:
         """<= 0: met (Optuna's convention); > 0: by how much it is missed."""
         value = scores[self.score]
+        if value is None:  # ts of a run that never settles misses any bound on ts
+            return math.inf
         return value - self.limit if self.operator == "<=" else self.limit - value
 
 
@@ -498,14 +500,15 @@ def run_point(scenario, fmu_paths: dict) -> dict:
                    None)
     if chatter is not None:
         outcome.update(status="chatter", reason=re.sub(r"^\[\w+\]\s*", "", chatter).split(": over the")[0])
-    elif not all(math.isfinite(value) for value in scores.values()):
+    elif not all(value is None or math.isfinite(value) for value in scores.values()):  # None: scores.why_none
         outcome.update(status="failed", reason=f"a score is not finite: {scores}")
     return outcome
 
 
 def worst_case(points: list) -> dict:
     """Every score's worst (largest) value over the grid points (every score: smaller is better)."""
-    return {key: max(point["scores"][key] for point in points) for key in SCORE_KEYS}
+    return {key: None if any(point["scores"][key] is None for point in points)  # not settled somewhere
+            else max(point["scores"][key] for point in points) for key in SCORE_KEYS}
 
 
 def relative_change(fine: float, coarse: float) -> float:
@@ -514,12 +517,17 @@ def relative_change(fine: float, coarse: float) -> float:
 
 def richardson(fine: dict, coarse: dict) -> dict:
     """2 f(h/2) - f(h) for every score (the step study's extrapolation)."""
-    return step_study.richardson(fine, coarse, metrics=tuple(coarse))
+    return step_study.richardson(fine, coarse, metrics=defined_in_both(fine, coarse))
 
 
 def error_estimates(fine: dict, coarse: dict) -> dict:
     """|f(h) - (2 f(h/2) - f(h))| = 2 |f(h) - f(h/2)|: the estimated error of the score at step h."""
-    return {key: 2.0 * abs(coarse[key] - fine[key]) for key in coarse}
+    return {key: 2.0 * abs(coarse[key] - fine[key]) for key in defined_in_both(fine, coarse)}
+
+
+def defined_in_both(fine: dict, coarse: dict) -> tuple:
+    """The scores both runs define (ts is None where a run does not settle: scores.why_none)."""
+    return tuple(key for key in coarse if coarse[key] is not None and fine.get(key) is not None)
 
 
 def evaluate(task: dict) -> dict:
@@ -545,7 +553,9 @@ def evaluate(task: dict) -> dict:
     else:
         outcome["scores"] = worst_case(points)
         objective = task["objective"]
-        if outcome["scores"][objective] < task["verify_below"]:
+        if outcome["scores"][objective] is None:  # ts of a run that never settles: no value to rank
+            outcome.update(status="undefined", reason=f"{objective}: {why_none(objective, scenario.start, scenario.stop)}")
+        elif outcome["scores"][objective] < task["verify_below"]:
             halves = [run_point(half_step(with_values(scenario, task["values"], variation)), task["fmu_paths"])
                       for variation in grid]
             failed = next((half for half in halves if half["status"] != "ok"), None)
@@ -554,7 +564,8 @@ def evaluate(task: dict) -> dict:
                                                                f"{failed['reason']}")
             else:
                 fine = worst_case(halves)
-                change = relative_change(fine[objective], outcome["scores"][objective])
+                change = (math.inf if fine[objective] is None
+                          else relative_change(fine[objective], outcome["scores"][objective]))
                 outcome["half_step"] = {"step": scenario.step / 2.0, "scores": fine, "change": change,
                                         "richardson": richardson(fine, outcome["scores"]),
                                         "error": error_estimates(fine, outcome["scores"])}
@@ -562,7 +573,7 @@ def evaluate(task: dict) -> dict:
                     coarse = outcome["scores"][objective]
                     outcome.update(status="step-dependent",
                                    reason=f"{objective} {coarse:.6g} at step {scenario.step:g} s, "
-                                          f"{fine[objective]:.6g} at half the step ({100 * change:.3g} % > "
+                                          f"{value_text(objective, fine[objective], scenario.start, scenario.stop)} at half the step ({100 * change:.3g} % > "
                                           f"{100 * task['tolerance']:g} %)")
     outcome["wall_s"] = clock.perf_counter() - began
     return outcome
@@ -639,6 +650,11 @@ def prepare(config: TuneConfig) -> Prepared:
     if not 0 < config.tolerance:
         raise TuneError(f"--verify-tolerance: give a number > 0 (percent), not {100 * config.tolerance:g}")
     scenario = scenarios.configure(config.scenario, config.controller, stop=config.stop)
+    for score in dict.fromkeys((objective, *(c.score for c in constraints))):
+        reason = undefined_reason(score, scenario.start, scenario.stop)
+        if reason is not None:
+            raise TuneError(f"{score} is not defined on this run: {reason}; give --stop of at least "
+                            f"{scenario.start + REFERENCE_PERIOD:.4g} s or another score")
     fmu_paths = config.fmu_paths
     if fmu_paths is None:
 
@@ -1432,7 +1448,7 @@ def study_markdown(summary: dict, folder: Path) -> str:
                   "error estimate of tuned at h |", "|---|---|---|---|---|---|"]
         for key in SCORE_KEYS:
             lines.append(f"| {key} | {_g(start['scores'][key]) if start else 'n/a'} | {_g(best['scores'][key])} | "
-                         f"{_g(half['scores'][key])} | {_g(half['richardson'][key])} | {_g(half['error'][key], 3)} |")
+                         f"{_g(half['scores'][key])} | {_g(half['richardson'].get(key))} | {_g(half['error'].get(key), 3)} |")
     lines += ["", f"![best so far]({name}_progress.png)", "",
               f"![Pareto fronts]({name}_pareto.png)", ""]
     lines += ["### Parameter importances", ""]
