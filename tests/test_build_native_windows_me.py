@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 import build_native
+import c_toolchain
 from tests import me_helpers as me
 from tests.test_build_native_windows import (DEFAULT_PREFIX, run_with_files, scaled_difference, wine,  # noqa: F401
                                        wine_program)
@@ -66,7 +67,7 @@ def native():
 
 def _build(target: str, name: str, *extra: str) -> Path:
     arguments = ["cc", "-target", target, "-std=c11", "-O2", "-Wall", "-Wextra", "-Werror", *extra]
-    digest = hashlib.sha256("\0".join([build_native._zig_version(), *arguments]).encode() + SOURCE.read_bytes())
+    digest = hashlib.sha256("\0".join([c_toolchain.zig_version(), *arguments]).encode() + SOURCE.read_bytes())
     folder = build_native.WORK_DIR / "hosts"
     binary = folder / f"{Path(name).stem}-{digest.hexdigest()[:16]}{Path(name).suffix}"
     if not binary.exists():

@@ -1008,13 +1008,20 @@ def _best_of(trials) -> tuple | None:
 def _ask(study, prepared: Prepared, heartbeat, owner: dict, x0, pending: list, log, best, count: int):
     """Ask one trial (the study holding ``count`` trials) and sample it; returns (trial, values) to run,
     or None when it needs no run (surplus of a shared budget, or told PRUNED as infeasible at once)."""
+    import optuna
     from optuna.trial import TrialState
 
     config = prepared.config
     study.sampler = sampler_for(config.sampler, config.seed, count, x0)
     trial = study.ask()
     pending.append(trial)
-    trial.set_user_attr("owner", owner)  # claimed: recover_dead_trials knows whose it is
+    try:
+        trial.set_user_attr("owner", owner)  # claimed: recover_dead_trials knows whose it is
+    except optuna.exceptions.UpdateFinishedTrialError:
+        # another process found it unclaimed for ORPHAN_S (a machine under heavy load), counted it lost
+        # and queued its parameters again: it is not ours to run
+        pending.remove(trial)
+        return None
     heartbeat.add(trial._trial_id)
     alive = sorted(t.number for t in study.get_trials(deepcopy=False) if t.state != TrialState.FAIL)
     if alive.index(trial.number) >= config.trials:  # other processes filled the budget meanwhile
@@ -1109,9 +1116,14 @@ def run_study(prepared: Prepared, study, log=None) -> dict:
             for future in sorted(done, key=lambda f: in_flight[f][0].number):
                 trial, values = in_flight.pop(future)
                 outcome = future.result()
-                state = _tell(study, trial, values, outcome, prepared)
                 pending.remove(trial)
                 heartbeat.remove(trial._trial_id)
+                try:
+                    state = _tell(study, trial, values, outcome, prepared)
+                except optuna.exceptions.UpdateFinishedTrialError:  # failed as lost by another process,
+                    log(f"note: trial {trial.number} was counted lost by another process, which runs its "
+                        "parameters again; this run of it is not recorded")
+                    continue
                 ran += 1
                 simulated += outcome.get("wall_s", 0.0)
                 value = outcome["scores"][config.objective] if state == TrialState.COMPLETE else None
