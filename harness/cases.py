@@ -23,6 +23,7 @@ import sys
 import time as clock
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -57,7 +58,11 @@ class Case:
 
     @property
     def scenario_name(self) -> str:
-        return self.scenario.name if isinstance(self.scenario, scenarios.Scenario) else str(self.scenario)
+        """The scenario's name; for a .toml path (a user's scenario), the file's stem."""
+        if isinstance(self.scenario, scenarios.Scenario):
+            return self.scenario.name
+        text = str(self.scenario)
+        return Path(text).stem if text.endswith(".toml") else text
 
     @property
     def name(self) -> str:
