@@ -172,3 +172,23 @@ def test_compat_refuses_a_folder_it_did_not_write(tmp_path, capsys):
     assert (tmp_path / "mine.txt").read_text() == "keep me"
     assert cli_main(["compat", "--out", "docs", "--edition", "python"]) == 2
     assert "would overwrite committed files" in capsys.readouterr().err
+
+
+def test_model_exchange_inputs_are_held_over_each_step_and_read_back_as_the_rows_of_each_step():
+    table = np.array([[0.0, 1.0, 10.0], [0.5, 2.0, 20.0], [1.0, 3.0, 30.0]])
+    held = compat.held(table)
+    assert held.tolist() == [[0.0, 1.0, 10.0], [0.5, 1.0, 10.0], [0.5, 2.0, 20.0], [1.0, 2.0, 20.0],
+                             [1.0, 3.0, 30.0]]
+    assert held[::2].tolist() == table.tolist()  # how write_entry reads the rows of each step back
+
+
+def test_a_replay_reads_outputs_with_the_previous_or_the_current_inputs(fmu_paths):
+    """TrackingReference: e = ym - y with y an input (direct feedthrough): the co-simulation replay reads e
+    at t_k+1 with y of t_k, the Model Exchange reference with y of t_k+1."""
+    experiment = compat.Experiment("TrackingReference", "test", "reference", 0.0, 0.5, 2, 1, ("y",), ("ym", "e"),
+                                   np.array([[0.0, 0.0], [0.5, 1.0], [1.0, 2.0]]))
+    previous = compat.replay(fmu_paths["TrackingReference"], experiment)
+    current = compat.replay(fmu_paths["TrackingReference"], experiment, outputs_with="current")
+    ym = previous[:, 1]
+    assert previous[:, 2] == pytest.approx(ym - [0.0, 0.0, 1.0], abs=1e-15)
+    assert current[:, 2] == pytest.approx(ym - [0.0, 1.0, 2.0], abs=1e-15)

@@ -62,7 +62,7 @@ HORIZON = 2.0  # s: the experiment covers the first seconds of the closed loop (
 MAX_STEPS = 4000  # ... in at most this many communication steps (CSV files under 1 MB)
 MAX_SIGNALS = 9  # outputs in _ref.csv besides time ("about 10 signals")
 MAX_CSV_BYTES = 1_000_000
-ME_TOLERANCE = 1e-8  # CVode's relative tolerance for the Model Exchange re-simulation
+ME_TOLERANCE = 1e-12  # CVode's relative tolerance for the Model Exchange re-simulation
 #: what a co-simulation re-simulation must reproduce (largest |out - ref| over the signal's range): the
 #: same binary, inputs and calls give the same numbers; 1e-12 leaves room for nothing but printing
 CS_AGREEMENT = 1e-12
@@ -159,9 +159,17 @@ def closed_loop_experiments(models, fmu_paths: dict) -> dict:
 
 
 # --------------------------------------------------------------- references
-def replay(fmu_path: Path, experiment: Experiment, table: np.ndarray | None = None) -> np.ndarray:
-    """The FMU alone driven by ``table`` (default: the experiment's inputs), as an importer replays an input
-    file, through the harness's FMI layer: rows time, then the experiment's outputs."""
+def replay(fmu_path: Path, experiment: Experiment, table: np.ndarray | None = None,
+           outputs_with: str = "previous") -> np.ndarray:
+    """The FMU alone driven by ``table`` (default: the experiment's inputs, one row per communication point),
+    through the harness's FMI layer: rows time, then the experiment's outputs.
+
+    Inputs are held over each step (row k from t_k to t_k+1). ``outputs_with="previous"``: the outputs at
+    t_k+1 are read right after doStep, with the inputs of t_k still set, as an importer replays an input
+    file in co-simulation (fmpy, the FMU Compliance Checker); ``"current"``: with the inputs of t_k+1 set
+    first, the continuous-time output y(t) = g(x(t), u(t)) that a Model Exchange importer records."""
+    if outputs_with not in ("previous", "current"):
+        raise ValueError(f"outputs_with={outputs_with!r}; valid: previous, current")
     table = experiment.input_table if table is None else table
     component = Component(experiment.instance, ModelInfo.read(fmu_path)).instantiate()
     try:
@@ -192,9 +200,23 @@ def replay(fmu_path: Path, experiment: Experiment, table: np.ndarray | None = No
             status = step(float(times[k]), float(times[k + 1] - times[k]), 1)
             if status > 1:
                 component.fail("fmi2DoStep", status, times[k])
+            if outputs_with == "current":
+                set_inputs(k + 1)
             rows.append([times[k + 1], *outputs(k + 1)])
     finally:
         component.free()
+    return np.array(rows)
+
+
+def held(table: np.ndarray) -> np.ndarray:
+    """An input table held over each step as an input file says it: row k at t_k and again at t_k+1 before
+    row k+1 (repeated times mark the steps; fmpy applies the value after such an event)."""
+    if len(table) < 2:
+        return table
+    rows = [table[0]]
+    for k in range(1, len(table)):
+        rows.append(np.concatenate([table[k, :1], table[k - 1, 1:]]))
+        rows.append(table[k])
     return np.array(rows)
 
 
@@ -269,9 +291,14 @@ def readme(entry: Entry, reference_rows: int) -> str:
              f"`{e.model}_ref.csv` ({reference_rows} rows: {', '.join(e.outputs)}) is the co-simulation result of "
              f"the FMU alone driven through afc-fmi's FMI layer: {replay_text}."]
     if entry.interface == "me":
-        lines += ["", f"For model exchange the same co-simulation result is the reference; an importer integrates "
-                      f"the model with its own solver (fmpy: CVode, relative tolerance {ME_TOLERANCE:g}) with the "
-                      "inputs interpolated linearly, so small differences are expected."]
+        lines[-1] = (f"`{e.model}_ref.csv` ({reference_rows} rows: {', '.join(e.outputs)}) is the result of the "
+                     "same model run by its co-simulation interface through afc-fmi's FMI layer, inputs held over "
+                     "each step, the outputs at t_k read with the inputs of t_k set: y(t) = g(x(t), u(t)).")
+        lines += ["", f"`{e.model}_in.csv` holds each input over its step: a row at t_k+1 repeats the value of t_k "
+                      "before the row with the new value (a step change, which fmpy applies as an input event). "
+                      "An importer integrates the model with its own solver (fmpy: CVode, relative tolerance "
+                      f"{ME_TOLERANCE:g}), the co-simulation interface with its own fixed-step integrator: expect "
+                      "agreement within the cross-check's band, not to the last digit."]
     lines += ["", "## Reproduce with fmpy", "", "```", resimulation_command(entry, Path("."), Path(f"{e.model}_out.csv"),
                                                                            relative=True), "```", ""]
     return "\n".join(lines)
@@ -290,11 +317,17 @@ def write_entry(entry: Entry, out: Path) -> Path:
     folder = out / "fmus" / entry.fmi_version / entry.interface / platform_folder() / entry.tool / tool_version() / e.model
     folder.mkdir(parents=True, exist_ok=True)
     shutil.copy(entry.fmu, folder / f"{e.model}.fmu")
+    # co-simulation: one row per communication point (an importer sets row k at t_k); model exchange: the
+    # same values held over each step, which an ODE solver needs said (it interpolates between rows)
+    inputs = held(e.input_table) if entry.interface == "me" else e.input_table
     if e.inputs:
-        write_csv(folder / f"{e.model}_in.csv", ["time", *e.inputs], e.input_table)
+        write_csv(folder / f"{e.model}_in.csv", ["time", *e.inputs], inputs)
+        written = np.genfromtxt(folder / f"{e.model}_in.csv", delimiter=",", skip_header=1, ndmin=2)
+        table = written[::2] if entry.interface == "me" else written  # the rows at t_0, t_1, ... of each step
+    else:
+        table = None
     # the reference: the FMU replays exactly the inputs written (read back from the file)
-    table = np.genfromtxt(folder / f"{e.model}_in.csv", delimiter=",", skip_header=1, ndmin=2) if e.inputs else None
-    reference = replay(entry.fmu, e, table)
+    reference = replay(entry.fmu, e, table, "current" if entry.interface == "me" else "previous")
     write_csv(folder / f"{e.model}_ref.csv", ["time", *e.outputs], reference)
     (folder / f"{e.model}_ref.opt").write_text(_opt_text(entry))
     (folder / "README.md").write_text(readme(entry, len(reference)))
@@ -316,7 +349,7 @@ def resimulation_arguments(entry: Entry, folder: Path, output: Path, relative: b
         arguments += ["--input-file", where(f"{e.model}_in.csv")]
     if entry.interface == "me":
         arguments += ["--interface-type", "ModelExchange", "--solver", "CVode", "--relative-tolerance",
-                      repr(ME_TOLERANCE)]
+                      repr(ME_TOLERANCE), "--dont-record-events"]
     else:
         arguments += ["--interface-type", "CoSimulation"]
     return arguments + ["--output-variables", *e.outputs, "--output-file", str(output)]
