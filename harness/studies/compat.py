@@ -528,7 +528,8 @@ def compat_command(args) -> int:
 def register(commands):
     parser = commands.add_parser(
         "compat", help="write the FMUs' compatibility information (FMI cross-check layout) and check it")
-    parser.add_argument("--out", required=True, help="folder to write fmus/, results/ and compat.json into")
+    parser.add_argument("--out", default="build/compat",
+                        help="folder to write fmus/, results/ and compat.json into (default build/compat)")
     parser.add_argument("--fmu", nargs="+", choices=[row.model_identifier for row in fmu_catalog.FMUS],
                         help="only these FMUs (default: every FMU)")
     parser.add_argument("--jobs", type=cli_args.positive_int, help="fmpy processes at once (default: every core)")
