@@ -7,13 +7,16 @@ From each FMU's declaration table (the ``VARIABLES`` of its pythonfmu class) thi
 module generates
 
 * the FMI 2.0 modelDescription.xml: pythonfmu's own ``to_xml`` of the class (the very
-  description of the pythonfmu edition), with the native FMU's GUID and capabilities;
+  description of the pythonfmu edition), with the native FMU's GUID and capabilities, plus
+  Model Exchange from the model's ``ModelExchange`` declaration (:func:`model_exchange`:
+  its continuous states, their derivatives der(x), event indicators and what each depends
+  on; docs/model_exchange.md);
 * the FMI 3.0 modelDescription.xml, translated from that FMI 2.0 description (names,
-  value references, causality, variability, start, units, min/max, output
-  dependencies, DefaultExperiment);
+  value references, causality, variability, start, units, min/max, derivatives, the whole
+  ModelStructure with dependencies, DefaultExperiment);
 * ``model_variables.h``: the variable table for the C layer (value references, names,
   starts, valid ranges and their wording), so the validation messages are the Python
-  edition's;
+  edition's, and the counts and value references of the Model Exchange variables;
 
 then compiles ``fmu_src/fmi_layer.c`` with the model's C files with zig's C compiler
 (``pip install ziglang``, the ``native`` extra) for
@@ -109,6 +112,7 @@ def model_guid(model_identifier: str) -> str:
     root.attrib.pop("guid", None)
     root.attrib.pop("generationDateAndTime", None)
     digest.update(ET.tostring(root))
+    digest.update(repr(model_exchange(model_identifier)).encode())
     for path in (*LAYER, *model.c_sources, *model.c_headers):
         digest.update(path.read_bytes())
     return "{" + str(uuid.UUID(bytes=digest.digest()[:16], version=5)) + "}"
@@ -130,6 +134,7 @@ def fmi2_description(model_identifier: str, guid: str) -> ET.Element:
     cosim.set("canBeInstantiatedOnlyOncePerProcess", "false")
     cosim.set("canGetAndSetFMUstate", "true")  # fmi_layer.c: get/set/free and (de)serialize the state
     cosim.set("canSerializeFMUstate", "true")
+    add_model_exchange(root, model_identifier)
     return root
 
 
@@ -141,6 +146,10 @@ def fmi3_description(fmi2_root: ET.Element) -> ET.Element:
                       instantiationToken=fmi2_root.get("guid"), variableNamingConvention="structured",
                       **attributes)
     cosim2 = fmi2_root.find("CoSimulation")
+    if fmi2_root.find("ModelExchange") is not None:
+        ET.SubElement(root, "ModelExchange", modelIdentifier=cosim2.get("modelIdentifier"),
+                      needsExecutionTool="false", canBeInstantiatedOnlyOncePerProcess="false",
+                      canGetAndSetFMUState="true", canSerializeFMUState="true", needsCompletedIntegratorStep="false")
     ET.SubElement(root, "CoSimulation", modelIdentifier=cosim2.get("modelIdentifier"),
                   canHandleVariableCommunicationStepSize="true", canGetAndSetFMUState="true",
                   canSerializeFMUState="true", canBeInstantiatedOnlyOncePerProcess="false",
@@ -159,8 +168,9 @@ def fmi3_description(fmi2_root: ET.Element) -> ET.Element:
     if experiment is not None:
         ET.SubElement(root, "DefaultExperiment", dict(experiment.attrib))
     variables = ET.SubElement(root, "ModelVariables")
-    references = {}
-    for index, scalar in enumerate(fmi2_root.find("ModelVariables"), start=1):
+    references = {str(index): scalar.get("valueReference")
+                  for index, scalar in enumerate(fmi2_root.find("ModelVariables"), start=1)}
+    for scalar in fmi2_root.find("ModelVariables"):
         typed = scalar[0]
         kind = {"Real": "Float64", "Integer": "Int32"}[typed.tag]
         element = ET.SubElement(variables, kind, name=scalar.get("name"),
@@ -168,25 +178,226 @@ def fmi3_description(fmi2_root: ET.Element) -> ET.Element:
         for key in ("description", "causality", "variability", "initial"):
             if scalar.get(key) is not None:
                 element.set(key, scalar.get(key))
-        for key in ("start", "unit", "min", "max"):
+        for key in ("start", "unit", "min", "max", "reinit"):
             if typed.get(key) is not None:
                 element.set(key, typed.get(key))
-        references[str(index)] = scalar.get("valueReference")
+        if typed.get("derivative") is not None:  # FMI 2.0: the state's index; FMI 3.0: its value reference
+            element.set("derivative", references[typed.get("derivative")])
     # FMI 3.0 requires the independent variable; it takes the value reference after the table's
-    time_reference = str(len(references))
+    # (the first one free: the Model Exchange variables follow it)
+    used = {int(vr) for vr in references.values()}
+    time_reference = str(min(set(range(len(used) + 1)) - used))
     ET.SubElement(variables, "Float64", name="time", valueReference=time_reference, causality="independent",
                   variability="continuous", description="simulation time")
     structure = ET.SubElement(root, "ModelStructure")
     structure2 = fmi2_root.find("ModelStructure")
-    outputs = structure2.find("Outputs")
-    for unknown in (outputs if outputs is not None else ()):
-        dependencies = (unknown.get("dependencies") or "").split()
-        ET.SubElement(structure, "Output", valueReference=references[unknown.get("index")],
-                      dependencies=" ".join(references[i] for i in dependencies))
-    initial = structure2.find("InitialUnknowns")
-    for unknown in (initial if initial is not None else ()):
-        ET.SubElement(structure, "InitialUnknown", valueReference=references[unknown.get("index")])
+    # Outputs, Derivatives, InitialUnknowns in that order (FMI 3.0's), then the event indicators
+    for list_name, element_name in (("Outputs", "Output"), ("Derivatives", "ContinuousStateDerivative"),
+                                    ("InitialUnknowns", "InitialUnknown")):
+        unknowns = structure2.find(list_name)
+        for unknown in (unknowns if unknowns is not None else ()):
+            element = ET.SubElement(structure, element_name, valueReference=references[unknown.get("index")])
+            if unknown.get("dependencies") is not None:
+                element.set("dependencies", " ".join(references[i] for i in unknown.get("dependencies").split()))
+            if unknown.get("dependenciesKind") is not None:
+                element.set("dependenciesKind", unknown.get("dependenciesKind"))
+    vrs = {scalar.get("name"): scalar.get("valueReference") for scalar in fmi2_root.find("ModelVariables")}
+    declared = {e.name: e for e in model_exchange(cosim2.get("modelIdentifier")).event_indicators}
+    for indicator in _event_indicator_elements(fmi2_root):
+        element = ET.SubElement(structure, "EventIndicator", valueReference=indicator.get("valueReference"))
+        pairs = sorted((int(vrs[known]), kind) for known, kind in declared[indicator.get("name")].depends_on)
+        element.set("dependencies", " ".join(str(vr) for vr, _ in pairs))
+        if pairs:
+            element.set("dependenciesKind", " ".join(kind for _, kind in pairs))
     return root
+
+
+# ------------------------------------------------------------------ model exchange
+@dataclass(frozen=True)
+class Derivative:
+    """der(state): the right-hand side of one continuous state."""
+    state: str  # the table variable that is the state
+    depends_on: tuple  # ((known, dependenciesKind), ...): the states and inputs it depends on
+    parameters: tuple = ()  # the parameters it depends on (its value in initialization mode)
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class EventIndicator:
+    name: str
+    description: str
+    depends_on: tuple = ()  # ((known, dependenciesKind), ...): states and inputs
+
+
+@dataclass(frozen=True)
+class ModelExchange:
+    """What a native FMU declares for Model Exchange beside its table (docs/model_exchange.md).
+
+    The continuous states are table variables (the plants' y, dy, ...; the controller's theta_j
+    and w_hat), in the order of ``derivatives``; the description adds der(<state>), the event
+    indicators and the model's other ``locals`` (discrete) after the table, with the value
+    references N + 1, ... (N, the table's length, is FMI 3.0's time).  ``output_states`` gives
+    the states an output depends on (Model Exchange knowns beside the inputs); ``reinit`` the
+    states an event may reset.  The C model file's hooks (fmi_layer.h) follow the same order.
+    """
+    derivatives: tuple = ()
+    output_states: tuple = ()  # ((output, ((state, dependenciesKind), ...)), ...)
+    event_indicators: tuple = ()
+    locals: tuple = ()  # ((name, description), ...)
+    reinit: tuple = ()
+
+    @property
+    def states(self) -> tuple:
+        return tuple(d.state for d in self.derivatives)
+
+    def extra_names(self) -> list:
+        """The names of the variables after the table, in value-reference order."""
+        return ([f"der({d.state})" for d in self.derivatives] + [e.name for e in self.event_indicators]
+                + [name for name, _ in self.locals])
+
+
+MODEL_EXCHANGE = {
+    "InvertedPendulum": ModelExchange(
+        derivatives=(Derivative("y", (("dy", "constant"),), (), "dx1 = x2 (37)"),
+                     Derivative("dy", (("y", "dependent"), ("dy", "dependent"), ("u", "dependent")),
+                                ("gv", "mc", "mp", "lp", "dist_gain"), "dx2 of (37) with d(t)"))),
+    "Manipulator": ModelExchange(
+        derivatives=(Derivative("y", (("dy", "constant"),), (), "dx1 = x2 (38)"),
+                     Derivative("dy", (("y", "dependent"), ("dy", "dependent"), ("u", "dependent")),
+                                ("gv", "lr", "dr", "cr", "vr", "mr0", "mr1"),
+                                "dx2 of (38, 39) in the friction mode (0 while stuck)")),
+        output_states=(("d", (("dy", "dependent"),)),),
+        event_indicators=(
+            EventIndicator("z_slip", "slip indicator: friction_mode x2 + 1e-10 rad/s while slipping (zero when "
+                                     "the link comes to rest), 1e-10 while stuck", (("dy", "discrete"),)),
+            EventIndicator("z_stick", "stick indicator: cr while slipping; cr - |u - mr gv lr cos x1| while "
+                                      "stuck (zero at break-away)", (("y", "dependent"), ("u", "dependent")))),
+        locals=(("friction_mode", "Model Exchange friction mode: 1 slipping forwards, -1 backwards, 0 stuck "
+                                  "(co-simulation: sgn(x2))"),),
+        reinit=("dy",)),
+    "DcMotorArm": ModelExchange(
+        derivatives=(Derivative("y", (("dy", "constant"),), (), "dx1 = x2"),
+                     Derivative("dy", (("y", "dependent"), ("dy", "fixed"), ("i", "fixed")),
+                                ("J", "b", "m", "lc", "gv", "Kt"), "dx2 = (Kt x3 - b x2 - m gv lc sin x1) / J"),
+                     Derivative("i", (("dy", "fixed"), ("i", "fixed"), ("u", "fixed")), ("Ke", "R", "L"),
+                                "dx3 = (u - R x3 - Ke x2) / L")),
+        output_states=(("d2y", (("y", "dependent"), ("dy", "fixed"), ("i", "fixed"))),)),
+    "TrackingReference": ModelExchange(),
+}
+
+
+def _controller_model_exchange() -> ModelExchange:
+    """theta1..thetaN (N = the table's rule weights) and w_hat: dtheta_j = gamma tau xi_j with the
+    projection (31), dw_hat = gamma_w tau (variant 3; else 0); tau and xi depend on every input."""
+    from fmu_src.afc_slave_base import INPUT, OUTPUT, PARAMETER
+    table = model_class("AdaptiveFuzzyController").VARIABLES
+    inputs = tuple((v.name, "dependent") for v in table if v.causality == INPUT)
+    parameters = tuple(v.name for v in table if v.causality == PARAMETER)
+    thetas = [v.name for v in table if v.causality == OUTPUT and v.name.startswith("theta") and v.name[5:].isdigit()]
+    derivatives = tuple(Derivative(name, ((name, "dependent"), *inputs), parameters,
+                                   f"d{name} of the adaptive law with projection (31)") for name in thetas)
+    derivatives += (Derivative("w_hat", inputs, parameters, "dw_hat = gamma_w tau (variant 3; else 0)"),)
+    return ModelExchange(derivatives=derivatives,
+                         output_states=(("u", (*((name, "dependent") for name in thetas), ("w_hat", "fixed"))),))
+
+
+def model_exchange(model_identifier: str) -> ModelExchange:
+    """The Model Exchange declaration of a native FMU."""
+    if model_identifier == "AdaptiveFuzzyController":
+        return _controller_model_exchange()
+    return MODEL_EXCHANGE[model_identifier]
+
+
+def _derivative_unit(unit: str) -> str:
+    """The unit of der(x) for x in ``unit``: rad -> rad/s, rad/s -> rad/s2, A -> A/s."""
+    if not unit:
+        return ""
+    if unit.endswith("/s"):
+        return unit + "2"
+    if unit.endswith("/s2"):
+        return unit[:-1] + "3"
+    return unit + "/s"
+
+
+def add_model_exchange(root: ET.Element, model_identifier: str) -> ET.Element:
+    """Model Exchange beside Co-Simulation in the FMI 2.0 description ``root`` (in place).
+
+    <ModelExchange>, numberOfEventIndicators, der(<state>) and the other variables after the table,
+    reinit on the states an event may reset, and the ModelStructure: the outputs' dependencies on
+    states, <Derivatives>, and the derivatives' <InitialUnknowns> (their knowns in initialization
+    mode: the initial dependencies of the states they depend on, their inputs and parameters).
+    """
+    from fmu_src.afc_slave_base import _unknown, initial_dependencies
+    declaration = model_exchange(model_identifier)
+    table = model_class(model_identifier).VARIABLES
+    rows = {v.name: v for v in table}
+    index = {v.name: i + 1 for i, v in enumerate(table)}
+    cosim = root.find("CoSimulation")
+    root.set("numberOfEventIndicators", str(len(declaration.event_indicators)))
+    me = ET.Element("ModelExchange", modelIdentifier=cosim.get("modelIdentifier"), needsExecutionTool="false",
+                    completedIntegratorStepNotNeeded="true", canBeInstantiatedOnlyOncePerProcess="false",
+                    canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="true",
+                    canSerializeFMUstate="true")
+    root.insert(list(root).index(cosim), me)
+    variables = root.find("ModelVariables")
+    for scalar in variables:
+        if scalar.get("name") in declaration.reinit:
+            scalar[0].set("reinit", "true")
+    definitions = root.find("UnitDefinitions")
+    units = {unit.get("name") for unit in definitions} if definitions is not None else set()
+    first = len(table) + 1  # value reference N is FMI 3.0's time
+    extras = declaration.extra_names()
+
+    def add(name, description, variability, **real):
+        vr = first + extras.index(name)
+        index[name] = len(variables) + 1
+        scalar = ET.SubElement(variables, "ScalarVariable", name=name, valueReference=str(vr),
+                               description=description, causality="local", variability=variability,
+                               initial="calculated")
+        ET.SubElement(scalar, "Real", **{k: v for k, v in real.items() if v})
+
+    for derivative in declaration.derivatives:
+        add(f"der({derivative.state})", derivative.description or f"derivative of {derivative.state}", "continuous",
+            derivative=str(index[derivative.state]), unit=_derivative_unit(rows[derivative.state].unit))
+    for indicator in declaration.event_indicators:
+        add(indicator.name, indicator.description, "continuous")
+    for name, description in declaration.locals:
+        add(name, description, "discrete")
+    for name in sorted({_derivative_unit(rows[state].unit) for state in declaration.states} - units - {""}):
+        ET.SubElement(definitions, "Unit", name=name)  # e.g. A/s for der(i)
+    structure = root.find("ModelStructure")
+    outputs = structure.find("Outputs")
+    states = dict(declaration.output_states)
+    for unknown in (outputs if outputs is not None else ()):
+        name = table[int(unknown.get("index")) - 1].name
+        if name not in states:
+            continue
+        known = [int(i) for i in unknown.get("dependencies", "").split()]
+        kinds = (unknown.get("dependenciesKind") or " ".join(["dependent"] * len(known))).split()
+        pairs = list(zip(known, kinds)) + [(index[state], kind) for state, kind in states[name]]
+        pairs.sort()
+        unknown.set("dependencies", " ".join(str(i) for i, _ in pairs))
+        unknown.set("dependenciesKind", " ".join(kind for _, kind in pairs))
+    if declaration.derivatives:
+        derivatives = ET.Element("Derivatives")
+        structure.insert(list(structure).index(structure.find("InitialUnknowns")), derivatives)
+        initial = structure.find("InitialUnknowns")
+        for derivative in declaration.derivatives:
+            _unknown(derivatives, index[f"der({derivative.state})"], [index[n] for n, _ in derivative.depends_on],
+                     [kind for _, kind in derivative.depends_on])
+            knowns = set(derivative.parameters)
+            for name, _ in derivative.depends_on:
+                knowns |= set(initial_dependencies(table, rows[name])) if name in declaration.states else {name}
+            _unknown(initial, index[f"der({derivative.state})"], sorted(index[n] for n in knowns))
+    return root
+
+
+def _event_indicator_elements(fmi2_root: ET.Element) -> list:
+    """The FMI 2.0 description's event indicator variables: the first numberOfEventIndicators
+    locals that are not derivatives (add_model_exchange writes them after the derivatives)."""
+    count = int(fmi2_root.get("numberOfEventIndicators") or 0)
+    return [s for s in fmi2_root.find("ModelVariables")
+            if s.get("causality") == "local" and s[0].get("derivative") is None][:count]
 
 
 def _c_string(text: str) -> str:
@@ -231,6 +442,20 @@ def variables_header(model_identifier: str, guid: str) -> str:
     for prefix, references in numbered_families(variables).items():
         lines.append(f"#define N_{prefix} {len(references)}")
         lines.append(f"static const int VRS_{prefix}[] = {{{', '.join(map(str, references))}}};")
+    declaration = model_exchange(model_identifier)
+    extras = declaration.extra_names()
+    lines += ["", "/* model exchange (build_native.model_exchange): the states, in the order of der(x), are "
+              + (", ".join(declaration.states) or "none") + " */",
+              f"#define N_STATES {len(declaration.states)}",
+              f"#define N_EVENT_INDICATORS {len(declaration.event_indicators)}",
+              f"#define N_LOCALS {len(declaration.locals)}",
+              f"#define VR_FIRST_DERIVATIVE {len(variables) + 1}",
+              "#define VR_FIRST_EVENT_INDICATOR (VR_FIRST_DERIVATIVE + N_STATES)",
+              "#define VR_FIRST_LOCAL (VR_FIRST_EVENT_INDICATOR + N_EVENT_INDICATORS)",
+              "#define VR_END (VR_FIRST_LOCAL + N_LOCALS)",
+              "#if defined(__GNUC__)", "__attribute__((unused))", "#endif",
+              "static const char *const EXTRA_NAMES[] = {"
+              + ", ".join(_c_string(name) for name in extras or ["(none)"]) + "};"]
     lines += ["", "#if defined(__GNUC__)", "__attribute__((unused))", "#endif",
               "static const VariableInfo MODEL_VARIABLES[N_VARIABLES] = {"]
     for v in variables:

@@ -9,6 +9,13 @@
  *   theta += h dtheta(t) (explicit Euler, the sampled-data update of an embedded target);
  * - e(0), de(0), ... of the modified error (Remark 3) are latched when initialisation ends.
  *
+ * Model exchange (docs/model_exchange.md): the continuous states are theta1..thetaN and w_hat,
+ * their derivatives the adaptive law [31] (adaptation_rates, estimate_rate) at the host's time,
+ * state and inputs; no events (the projection (31) and the saturation (7) are continuous); the
+ * initial error is latched from the inputs at exitInitializationMode (and follows inputs the
+ * host sets in event mode at the start time), with no check window and no chatter monitor
+ * (both watch co-simulation's communication steps).
+ *
  * General form (issue 17): the order n and the number of sets m come from the parameters
  * `order` and `sets` when the declaration table has them, else n = 2, m = 2; the rule
  * weights are the table's theta1..thetaN (M = m^n <= N).
@@ -71,6 +78,9 @@ static const int MODIFIED_ERROR_VR[] = {VR_E, VR_dE,
 #endif
 };
 #define SUPPORTED_ORDER ((int)(sizeof ERROR_VR / sizeof ERROR_VR[0]))
+#if N_STATES != N_theta + 1
+#error "the declaration's model exchange states must be theta1..thetaN and w_hat"
+#endif
 static const char *const ERROR_NAMES[] = {"e", "de", "d2e", "d3e"};
 #if HOST_ROBUST
 static const int PINNED_ERROR_VR[] = {VR_e0, VR_de0,
@@ -210,6 +220,8 @@ int model_initialize(ModelInstance *m, double start_time) {
         double pinned[MAX_ORDER];
         for (int i = 0; i < n; i++) pinned[i] = m->s->values[PINNED_ERROR_VR[i]];
         latch_pin(&state->latch, n, start_time, pinned);
+    } else if (m->model_exchange) { /* the inputs the host set for the initial state: for good */
+        latch_pin(&state->latch, n, start_time, sample);
     } else { /* tentative: checked over the first doSteps (Remark 3, initial_error_latch) */
         latch_start(&state->latch, n, start_time, sample);
     }
@@ -320,6 +332,74 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     }
 #else
     (void)ERROR_NAMES;
+#endif
+    return MODEL_OK;
+}
+
+/* ---------------------------------------------------------------- model exchange */
+
+int model_get_continuous_states(ModelInstance *m, double x[]) {
+    for (int j = 0; j < N_theta; j++) x[j] = m->s->values[VRS_theta[j]];
+    x[N_theta] = V(m, w_hat);
+    return MODEL_OK;
+}
+
+int model_set_continuous_states(ModelInstance *m, const double x[]) {
+    for (int j = 0; j < N_theta; j++) m->s->values[VRS_theta[j]] = x[j];
+    V(m, w_hat) = x[N_theta];
+    return MODEL_OK;
+}
+
+/* dtheta_j [31] and dw_hat at the instance's time, theta, w_hat and inputs: tau from the modified
+ * error E and the basis xi of the outputs (controller_output [9]), as a doStep takes them */
+int model_get_derivatives(ModelInstance *m, double dx[]) {
+    ControllerState *state = STATE(m);
+    if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return MODEL_ERROR;
+    const double *values = m->s->values;
+    const ControllerParameters *p = &state->p;
+    int n = p->order, rules = p->rules;
+    double error[MAX_ORDER], theta[MAX_RULES];
+    for (int i = 0; i < n; i++) error[i] = values[MODIFIED_ERROR_VR[i]];
+    for (int j = 0; j < rules; j++) theta[j] = values[VRS_theta[j]];
+    double tau = adaptation_signal(n, error, p->p_b); /* [31] */
+    adaptation_rates(rules, theta, tau, state->xi, V(m, gamma), V(m, m_theta), V(m, delta), dx); /* [31] */
+    for (int j = rules; j < N_theta; j++) dx[j] = 0.0; /* rule weights beyond sets^order stay 0 */
+    dx[N_theta] = p->variant == VARIANT_FAE ? estimate_rate(tau, V(m, gamma_w)) : 0.0;
+    return MODEL_OK;
+}
+
+int model_get_event_indicators(ModelInstance *m, double z[]) {
+    (void)m; (void)z;
+    return MODEL_OK;
+}
+
+int model_get_locals(ModelInstance *m, double values[]) {
+    (void)m; (void)values;
+    return MODEL_OK;
+}
+
+/* the event update: in event mode at the start time (the initial event iteration, before any
+ * integration) the latched e(t0), de(t0), ... follow inputs the host set there, so that E(t0) = 0
+ * holds for the inputs the continuous phase starts from; pinned values (initial_error = 2) stay */
+int model_update_discrete_states(ModelInstance *m, int *states_changed) {
+    *states_changed = 0;
+#if HOST_ROBUST
+    ControllerState *state = STATE(m);
+    if (m->model_exchange && m->s->time == m->s->start_time && (int)V(m, initial_error) != INITIAL_ERROR_PINNED) {
+        int n = (int)state->latch.order, moved = 0;
+        double sample[MAX_ORDER];
+        for (int i = 0; i < n; i++) {
+            sample[i] = m->s->values[ERROR_VR[i]];
+            moved = moved || sample[i] != state->latch.latched[i];
+        }
+        if (moved) {
+            latch_pin(&state->latch, n, m->s->start_time, sample);
+            latch_initial_error(m);
+            m->outputs_stale = 1;
+        }
+    }
+#else
+    (void)m;
 #endif
     return MODEL_OK;
 }

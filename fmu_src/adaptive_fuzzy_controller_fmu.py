@@ -38,6 +38,7 @@ _INF = math.inf
 # u depends on every error and reference input: n is a parameter (ym.. with fls_input = 2)
 FEEDTHROUGH = ("e", "de", "ym", "dym", "d2e", "d3e", "d2ym", "d3ym")
 INITIAL_ERROR_PARAMETERS = ("e0", "de0", "d2e0", "d3e0")  # pinned x(0), first n used
+THETA_INITIAL = ("theta0", "order", "sets")  # theta_j(0) = theta0 for j <= sets^order, else 0
 INITIAL_ERROR_FROM_INPUTS = 1
 INITIAL_ERROR_PINNED = 2
 
@@ -76,11 +77,12 @@ VARIABLES = (
              depends_on=("e", "de", "ym", "dym")),
     Variable("alpha2", OUTPUT, 1.0, description="contraction-expansion factor of input 2 (23)",
              depends_on=("e", "de", "ym", "dym")),
-    Variable("theta1", OUTPUT, 0.0, description="rule weight theta_1 (rule (1,1))"),
-    Variable("theta2", OUTPUT, 0.0, description="rule weight theta_2 (rule (1,2))"),
-    Variable("theta3", OUTPUT, 0.0, description="rule weight theta_3 (rule (2,1))"),
-    Variable("theta4", OUTPUT, 0.0, description="rule weight theta_4 (rule (2,2))"),
-    Variable("w_hat", OUTPUT, 0.0, description="approximation-error estimate (variant 3; else 0)"),
+    Variable("theta1", OUTPUT, 0.0, description="rule weight theta_1 (rule (1,1))", initial_depends_on=THETA_INITIAL),
+    Variable("theta2", OUTPUT, 0.0, description="rule weight theta_2 (rule (1,2))", initial_depends_on=THETA_INITIAL),
+    Variable("theta3", OUTPUT, 0.0, description="rule weight theta_3 (rule (2,1))", initial_depends_on=THETA_INITIAL),
+    Variable("theta4", OUTPUT, 0.0, description="rule weight theta_4 (rule (2,2))", initial_depends_on=THETA_INITIAL),
+    Variable("w_hat", OUTPUT, 0.0, description="approximation-error estimate (variant 3; else 0)",
+             initial_depends_on=()),  # w_hat(0) = 0
     # appended rows (value references are table order: never reorder)
     Variable("initial_error", PARAMETER, INITIAL_ERROR_FROM_INPUTS, kind="Integer", minimum=1, maximum=2,
              description="e(0), de(0) of the modified error: 1 = from the inputs, checked over the first "
@@ -117,8 +119,8 @@ VARIABLES = (
              depends_on=("d2e", "d2ym")),
     Variable("alpha4", OUTPUT, 1.0, description="contraction-expansion factor of input 4 (23) (n = 4; else 1)",
              depends_on=("d3e", "d3ym")),
-    *(Variable(f"theta{j}", OUTPUT, 0.0, description=f"rule weight theta_{j} (0 when {j} > sets^order)")
-      for j in range(5, afc_math.RULES_MAX + 1)),
+    *(Variable(f"theta{j}", OUTPUT, 0.0, description=f"rule weight theta_{j} (0 when {j} > sets^order)",
+               initial_depends_on=THETA_INITIAL) for j in range(5, afc_math.RULES_MAX + 1)),
 )
 ERROR_INPUTS = ("e", "de", "d2e", "d3e")  # e^(i), i = 0..3
 REFERENCE_INPUTS = ("ym", "dym", "d2ym", "d3ym")

@@ -229,6 +229,18 @@ void adapted_weights(int rules, const double theta[], double tau, const double x
     }
 }
 
+void adaptation_rates(int rules, const double theta[], double tau, const double xi[], double gamma, double m_theta,
+                      double delta, double rates[]) {
+    double rate = gamma * tau;
+    for (int j = 0; j < rules; j++) {
+        double value = theta[j], basis = xi[j];
+        rates[j] = -m_theta <= value && value <= m_theta ? rate * basis
+                                                          : projected_rate(value, tau, basis, gamma, m_theta, delta);
+    }
+}
+
+double estimate_rate(double tau, double gamma_w) { return gamma_w * tau; }
+
 /* ----------------------------------------------------------- control law  [9] */
 void fls_inputs(int n, const double error[], const double reference[], const double modified[], int fls_input,
                 double x[]) {

@@ -28,6 +28,8 @@
  * adaptation_signal          adaptation_signal     [31]
  * projected_rate             projected_rate        [31]
  * adapted_weights            adapted_weights       [31]
+ * adaptation_rates           adaptation_rates      [31]
+ * estimate_rate              estimate_rate
  * fls_inputs                 fls_inputs
  * contraction_factors        contraction_factors   [23]
  * normalized_inputs          normalized_inputs     [7]
@@ -125,6 +127,14 @@ double projected_rate(double theta_j, double tau, double xi_j, double gamma, dou
 /* theta_j + h dtheta_j for every rule j: the sampled-data (explicit Euler) step of [31] */
 void adapted_weights(int rules, const double theta[], double tau, const double xi[], double gamma, double m_theta,
                      double delta, double step_size, double adapted[]);
+
+/* dtheta_j for every rule j: the adaptive law with smooth projection [31] in continuous time (model
+ * exchange): the rates adapted_weights multiplies by the step */
+void adaptation_rates(int rules, const double theta[], double tau, const double xi[], double gamma, double m_theta,
+                      double delta, double rates[]);
+
+/* dw_hat = gamma_w tau: the approximation-error estimate of variant 3 in continuous time */
+double estimate_rate(double tau, double gamma_w);
 
 /* the FLS input vector: the modified error (fls_input 1) or the state ym^(i) - e^(i) (2) */
 void fls_inputs(int n, const double error[], const double reference[], const double modified[], int fls_input,

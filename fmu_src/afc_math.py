@@ -315,6 +315,25 @@ def adapted_weights(theta, tau: float, xi, gamma: float, m_theta: float, delta: 
             for value, basis in zip(theta, xi)]
 
 
+def adaptation_rates(theta, tau: float, xi, gamma: float, m_theta: float, delta: float) -> list:
+    """dtheta_j for every rule j: the adaptive law with smooth projection [31] in continuous time
+    (Model Exchange: the host's solver integrates them).
+
+    The same numbers as the rates :func:`adapted_weights` multiplies by the step: gamma tau xi_j
+    where |theta_j| <= M_theta, else :func:`projected_rate`.  Continuous in theta_j and tau (the
+    projection factor is 1 at |theta_j| = M_theta, the rate 0 at tau = 0): no event is needed.
+    """
+    rate = gamma * tau
+    return [rate * basis if -m_theta <= value <= m_theta
+            else projected_rate(value, tau, basis, gamma, m_theta, delta)
+            for value, basis in zip(theta, xi)]
+
+
+def estimate_rate(tau: float, gamma_w: float) -> float:
+    """dw_hat = gamma_w tau: the approximation-error estimate of variant 3 in continuous time."""
+    return gamma_w * tau
+
+
 # ------------------------------------------------------- control law  [9]
 def fls_inputs(error, reference, modified, fls_input: int) -> tuple:
     """The FLS input vector: E = (E, dE, ...) (fls_input 1) or the state

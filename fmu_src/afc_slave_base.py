@@ -77,6 +77,12 @@ class Variable:
     exclusive_minimum: bool = False  # True: the value must be > minimum
     exclusive_maximum: bool = False  # True: the value must be < maximum
     depends_on: tuple[str, ...] = ()  # outputs: inputs with direct feedthrough
+    # outputs: the dependenciesKind of each entry of depends_on ("constant": a constant factor,
+    # "dependent": no particular structure, ...); () leaves it undeclared (FMI: dependent)
+    dependency_kinds: tuple[str, ...] = ()
+    # outputs: what the output's value in initialization mode depends on (parameters and inputs:
+    # the knowns of FMI's InitialUnknowns); None: every parameter and depends_on (conservative)
+    initial_depends_on: tuple[str, ...] | None = None
 
     def valid_range(self) -> str:
         """The valid range as text, e.g. ``(0, 1)``, ``> 0``, ``{1, 2, 3}``."""
@@ -121,6 +127,32 @@ def finite(name, start, unit="", description=""):
     return Variable(name, PARAMETER, start, unit, description)
 
 
+def initial_dependencies(variables, variable: Variable) -> tuple:
+    """The knowns (parameters, inputs) of ``variable``'s value in initialization mode, in table order:
+    its ``initial_depends_on``, or every parameter and its ``depends_on`` when that is None."""
+    if variable.initial_depends_on is not None:
+        names = set(variable.initial_depends_on)
+    else:
+        names = {v.name for v in variables if v.causality == PARAMETER} | set(variable.depends_on)
+    known = {v.name for v in variables if v.causality in (PARAMETER, INPUT)}
+    if not names <= known:
+        raise ValueError(f"{variable.name}: initial dependencies {sorted(names - known)} are not parameters or inputs")
+    return tuple(v.name for v in variables if v.name in names)
+
+
+def _unknown(parent, index: int, dependencies, kinds=()) -> Element:
+    """An FMI 2.0 <Unknown> with its dependencies ordered by index (as FMI 2.0 requires), and
+    their dependenciesKind when declared."""
+    if kinds and len(kinds) != len(dependencies):
+        raise ValueError(f"Unknown {index}: {len(kinds)} dependency kinds for {len(dependencies)} dependencies")
+    order = sorted(range(len(dependencies)), key=lambda i: dependencies[i])
+    element = SubElement(parent, "Unknown", index=str(index),
+                         dependencies=" ".join(str(dependencies[i]) for i in order))
+    if kinds:
+        element.set("dependenciesKind", " ".join(kinds[i] for i in order))
+    return element
+
+
 class FmuModelError(RuntimeError):
     """Raised inside an FMU call; the pythonfmu wrapper reports it to the host."""
 
@@ -144,19 +176,40 @@ def _outlive_pythonfmu_cleanup(slave) -> None:
         _py_incref(owned)
 
 
+def _hide_imported_classes(script_locals, module_globals) -> None:
+    """Leave pythonfmu 0.7's class search one class to list: the slave class, defined last.
+
+    After re-running the FMU script in a fresh locals dict, ``findClass`` takes a list of
+    the MRO of every class in that dict, and the repr and UTF-8 bytes of each MRO entry,
+    and releases none of them: per fmi2Instantiate about 0.2 KiB per MRO entry.  The
+    classes a script imports (the base under the name ``Fmi2Slave``, ``Variable``,
+    ``DefaultExperiment``, ``itemgetter`` ...) added 1.2 to 1.6 KiB per instantiate to
+    the slave class's own 0.9 KiB.  Each of them is the very object the module globals
+    hold under the same name, so removing it from the locals dict changes nothing for
+    the rest of the script (a name missing from the locals is looked up in the globals)
+    and hides it from the search.
+    """
+    for name, value in list(script_locals.items()):
+        if isinstance(value, type) and module_globals.get(name) is value:
+            del script_locals[name]
+
+
 class _SlaveMeta(ABCMeta):
     """Make pythonfmu 0.7's re-execution of the FMU script at every instantiate cheap.
 
     At every fmi2Instantiate, pythonfmu 0.7's C wrapper (``findClass``) runs the FMU
     script once more, with the module's globals and a fresh locals dict, to find the
-    slave class; it keeps a reference to a list of each new class's MRO, so every class
-    created there leaks with all its functions (about 10 kB per instantiate, measured
-    in tests/test_life_cycle.py), and it releases the (borrowed) module globals once.
-    On such a re-execution this metaclass hands back the class already defined in the
-    module instead of building a new one, and takes the one reference to the module
-    globals that the wrapper is about to release (until now the leaked functions held
-    it).  A normal import or ``importlib.reload`` (locals is globals) builds the class
-    as usual.
+    slave class; it keeps a reference to a list of each class's MRO, so every class
+    created there leaks with all its functions (a bare pythonfmu FMU grows by about
+    7 KiB per instantiate, measured in tests/test_memory_cycles.py), and it releases
+    the (borrowed) module globals once.  On such a re-execution this metaclass hands
+    back the class already defined in the module instead of building a new one, takes
+    the one reference to the module globals that the wrapper is about to release (until
+    now the leaked functions held it), and hides the script's imported classes from the
+    search (:func:`_hide_imported_classes`).  A normal import or ``importlib.reload``
+    (locals is globals) builds the class as usual.  The slave class statement must be
+    the last top-level statement of the script that binds a class: a class bound after
+    it would be listed at every instantiate again.
     """
 
     def __new__(mcls, name, bases, namespace, **kwargs):
@@ -170,8 +223,14 @@ class _SlaveMeta(ABCMeta):
             if cell is not None:
                 cell.cell_contents = existing
             _py_incref(module_globals)
+            _hide_imported_classes(caller.f_locals, module_globals)
             return existing
         return super().__new__(mcls, name, bases, namespace, **kwargs)
+
+    def __repr__(cls):
+        # findClass keeps the repr of every class in the slave's MRO at every instantiate:
+        # interned, it is one string per class for the process instead of one per instantiate
+        return sys.intern(super().__repr__())
 
 
 def _drop_duplicate_path(resources) -> None:
@@ -333,11 +392,12 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
                 unknown_dependencies = [n for n in v.depends_on if n not in index]
                 if unknown_dependencies:
                     raise ValueError(f"{v.name} depends on unknown {unknown_dependencies}")
-                SubElement(outputs_node, "Unknown", index=str(index[v.name]),
-                           dependencies=" ".join(str(index[n]) for n in v.depends_on))
+                _unknown(outputs_node, index[v.name], [index[n] for n in v.depends_on], v.dependency_kinds)
+            # InitialUnknowns: the outputs' values in initialization mode and what they depend on
+            # (parameters, inputs): a plant's y(0) depends on x1_start, not on u
             initial_node = SubElement(structure, "InitialUnknowns")
             for v in outputs:
-                SubElement(initial_node, "Unknown", index=str(index[v.name]))
+                _unknown(initial_node, index[v.name], [index[n] for n in initial_dependencies(self.VARIABLES, v)])
         return root
 
     # ---------------------------------------------------------- life cycle

@@ -1,18 +1,21 @@
-/* The FMI layer of the native FMUs: FMI 2.0 (FMI_VERSION 2) or FMI 3.0 (FMI_VERSION 3)
- * co-simulation, written once for the four models (see fmi_layer.h).
+/* The FMI layer of the native FMUs: FMI 2.0 (FMI_VERSION 2) or FMI 3.0 (FMI_VERSION 3),
+ * co-simulation and model exchange, written once for the models (see fmi_layer.h).
  *
  * Life cycle (a state machine in the manner of the Modelica Reference-FMUs):
  *
  *   instantiated --enterInitializationMode--> initialization --exitInitializationMode-->
- *   step --terminate--> terminated;  reset from any state -> instantiated.
+ *   co-simulation:  step --terminate--> terminated;
+ *   model exchange: event <--enterEventMode / enterContinuousTimeMode--> continuous time
+ *                   --terminate--> terminated;
+ *   reset from any state -> instantiated.
  *
  * Each call checks it is allowed in the current state and otherwise returns Error with
  * a message naming the call and the state.  Model errors (invalid parameters, NaN
  * inputs, divergence) are returned as Error, never Fatal, and leave the instance usable:
  * the host may correct a parameter and exit initialisation again, or free the instance.
- * Every function of the API is exported; those this FMU does not support (model
- * exchange, derivatives, events, clocks, types it has no variables of) return Error
- * with a log message.
+ * Every function of the API is exported; those this FMU does not support (directional
+ * derivatives, clocks, scheduled execution, types it has no variables of, the other
+ * interface's calls) return Error with a log message.  Model exchange: docs/model_exchange.md.
  */
 #include <float.h>
 #include <math.h>
@@ -55,8 +58,11 @@ enum {
     MODE_INITIALIZATION = 2,
     MODE_STEP = 4,
     MODE_TERMINATED = 8,
+    MODE_EVENT = 16,      /* model exchange */
+    MODE_CONTINUOUS = 32, /* model exchange */
 };
-#define ANY_MODE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED)
+#define ANY_MODE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED | MODE_EVENT | MODE_CONTINUOUS)
+#define INITIALIZED_MODES (MODE_STEP | MODE_EVENT | MODE_CONTINUOUS) /* between exitInitializationMode and terminate */
 
 static const char *mode_name(int mode) {
     switch (mode) {
@@ -64,6 +70,8 @@ static const char *mode_name(int mode) {
     case MODE_INITIALIZATION: return "Initialization Mode";
     case MODE_STEP: return "Step Mode";
     case MODE_TERMINATED: return "Terminated";
+    case MODE_EVENT: return "Event Mode";
+    case MODE_CONTINUOUS: return "Continuous-Time Mode";
     default: return "unknown";
     }
 }
@@ -221,7 +229,7 @@ static void reset_snapshot(ModelInstance *m) {
     model_construct(m);
 }
 
-static ModelInstance *create_instance(const char *name, Host host, int logging_on) {
+static ModelInstance *create_instance(const char *name, Host host, int logging_on, int model_exchange) {
     ModelInstance *m = (ModelInstance *)calloc(1, sizeof(ModelInstance));
     if (!m) return NULL;
     m->s = (Snapshot *)calloc(1, snapshot_bytes());
@@ -235,6 +243,7 @@ static ModelInstance *create_instance(const char *name, Host host, int logging_o
     *(Host *)m->host = host;
     m->internal = (char *)m->s + sizeof(Snapshot);
     m->logging_on = logging_on;
+    m->model_exchange = model_exchange;
     m->feedthrough = MODEL_FEEDTHROUGH;
     reset_snapshot(m);
     return m;
@@ -280,7 +289,7 @@ static Status exit_initialization(ModelInstance *m) {
     m->s->initialized = 1.0;
     m->stale_on_set = m->feedthrough;
     m->outputs_stale = 1;
-    m->mode = MODE_STEP;
+    m->mode = m->model_exchange ? MODE_EVENT : MODE_STEP; /* model exchange: the initial event iteration */
     return STATUS_OK;
 }
 
@@ -301,6 +310,10 @@ static int refresh_outputs(ModelInstance *m) {
 static Status do_step(ModelInstance *m, double current_time, double step_size, const char *call) {
     REPRS;
     double time = m->s->time;
+    if (m->model_exchange) {
+        fmu_fail(m, "%s is a co-simulation function; this instance was instantiated for model exchange", call);
+        return STATUS_ERROR;
+    }
     if (!(m->mode == MODE_STEP && step_size >= 0.0 &&
           fabs(current_time - time) <= 1e-9 * (fabs(time) + step_size))) {
         const char *rule;
@@ -335,10 +348,19 @@ static Status do_step(ModelInstance *m, double current_time, double step_size, c
 /* FMI 3.0: the independent variable time has the value reference after the table's */
 #define VR_TIME ((unsigned)N_VARIABLES)
 
+/* the variables the description adds after the table for model exchange (der(x), event
+ * indicators, the model's locals): Real, calculated by the FMU */
+#define IS_EXTRA(vr) ((vr) >= (unsigned)VR_FIRST_DERIVATIVE && (vr) < (unsigned)VR_END)
+
 static int valid_reference(ModelInstance *m, unsigned vr, int integer, const char *call) {
     if (FMI_VERSION == 3 && vr == VR_TIME && !integer) return 1;
+    if (IS_EXTRA(vr) && !integer) return 1;
     if (vr >= (unsigned)N_VARIABLES) {
-        fmu_fail(m, "%s: unknown value reference %u (this FMU has 0 .. %d)", call, vr, N_VARIABLES - 1);
+        if (IS_EXTRA(vr))
+            fmu_fail(m, "%s: variable %s (value reference %u) is of type Real", call,
+                     EXTRA_NAMES[vr - VR_FIRST_DERIVATIVE], vr);
+        else
+            fmu_fail(m, "%s: unknown value reference %u (this FMU has 0 .. %d)", call, vr, VR_END - 1);
         return 0;
     }
     if (MODEL_VARIABLES[vr].is_integer != integer) {
@@ -349,16 +371,31 @@ static int valid_reference(ModelInstance *m, unsigned vr, int integer, const cha
     return 1;
 }
 
+/* the values of the variables after the table (derivatives, event indicators, locals), computed
+ * once per call that reads any of them */
+static int extra_values(ModelInstance *m, double extra[]) {
+    if (model_get_derivatives(m, extra) != MODEL_OK) return MODEL_ERROR;
+    if (model_get_event_indicators(m, extra + N_STATES) != MODEL_OK) return MODEL_ERROR;
+    return model_get_locals(m, extra + N_STATES + N_EVENT_INDICATORS);
+}
+
 static Status get_values(ModelInstance *m, const unsigned *vr, size_t n, double *real, int *integer,
                          const char *call) {
-    CHECK(call, MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED);
+    CHECK(call, MODE_INITIALIZATION | INITIALIZED_MODES | MODE_TERMINATED);
     if (n == 0) return STATUS_OK;
     if (refresh_outputs(m) != MODEL_OK) return STATUS_ERROR;
     const double *values = m->s->values;
+    double extra[VR_END - VR_FIRST_DERIVATIVE + 1];
+    int extra_ready = 0;
     for (size_t i = 0; i < n; i++) {
         if (!valid_reference(m, vr[i], integer != NULL, call)) return STATUS_ERROR;
         if (integer) integer[i] = (int)values[vr[i]];
-        else real[i] = vr[i] == VR_TIME ? m->s->time : values[vr[i]];
+        else if (vr[i] == VR_TIME) real[i] = m->s->time;
+        else if (IS_EXTRA(vr[i])) {
+            if (!extra_ready && extra_values(m, extra) != MODEL_OK) return STATUS_ERROR;
+            extra_ready = 1;
+            real[i] = extra[vr[i] - VR_FIRST_DERIVATIVE];
+        } else real[i] = values[vr[i]];
     }
     return STATUS_OK;
 }
@@ -380,11 +417,12 @@ static int settable(ModelInstance *m, unsigned vr, double value, const char *cal
         return 0;
     }
     if (v->causality == CAUSALITY_PARAMETER) {
-        if (m->mode == MODE_STEP) {
+        if (m->mode & INITIALIZED_MODES) {
             fmu_fail(m, "%s: %s = %s refused at t = %s: %s is a parameter of variability fixed, which can be set "
-                     "only before " EXIT_INIT_CALL " (it keeps %s); in step mode only inputs can be set", call,
+                     "only before " EXIT_INIT_CALL " (it keeps %s); in %s only inputs can be set", call,
                      v->name, value_repr((int)vr, value, text), R(m->s->time), v->name,
-                     value_repr((int)vr, m->s->values[vr], kept));
+                     value_repr((int)vr, m->s->values[vr], kept),
+                     m->mode == MODE_STEP ? "step mode" : "event and continuous-time mode");
             return 0;
         }
         if (!isfinite(value)) {
@@ -410,6 +448,11 @@ static Status set_values(ModelInstance *m, const unsigned *vr, size_t n, const d
         if (!valid_reference(m, vr[i], integer != NULL, call)) { status = STATUS_ERROR; break; }
         if (vr[i] == VR_TIME) {
             fmu_fail(m, "%s: time is the independent variable and cannot be set", call);
+            status = STATUS_ERROR;
+            break;
+        }
+        if (IS_EXTRA(vr[i])) {
+            fmu_fail(m, "%s: %s is calculated by the FMU and cannot be set", call, EXTRA_NAMES[vr[i] - VR_FIRST_DERIVATIVE]);
             status = STATUS_ERROR;
             break;
         }
@@ -454,9 +497,16 @@ static Status set_state(ModelInstance *m, const void *state) {
     m->stale_on_set = m->feedthrough || m->s->initialized == 0.0;
     m->outputs_stale = 1;
     /* the restored state decides the mode: an initialised state steps from its time, also in
-     * a fresh instance (the FMU is as it was when the state was taken); terminate stays final */
-    if (m->mode != MODE_TERMINATED)
-        m->mode = m->s->initialized != 0.0 ? MODE_STEP : (m->mode == MODE_STEP ? MODE_INITIALIZATION : m->mode);
+     * a fresh instance (the FMU is as it was when the state was taken); terminate stays final.
+     * Model exchange: an initialised state keeps the event or continuous-time mode the instance
+     * is in, and brings a fresh instance to event mode at its time */
+    if (m->mode == MODE_TERMINATED) return STATUS_OK;
+    if (m->s->initialized == 0.0)
+        m->mode = (m->mode & INITIALIZED_MODES) ? MODE_INITIALIZATION : m->mode;
+    else if (!m->model_exchange)
+        m->mode = MODE_STEP;
+    else if (!(m->mode & (MODE_EVENT | MODE_CONTINUOUS)))
+        m->mode = MODE_EVENT;
     return STATUS_OK;
 }
 
@@ -502,6 +552,114 @@ static Status deserialize_state(ModelInstance *m, const unsigned char *in, size_
     return STATUS_OK;
 }
 
+/* ---------------------------------------------------------- model exchange */
+
+/* the call is a model exchange function allowed in the current state, else log and return 0 */
+static int me_allowed(ModelInstance *m, const char *call, int modes) {
+    if (!m) return 0;
+    if (!m->model_exchange) {
+        fmu_fail(m, "%s is a model exchange function; this instance was instantiated for co-simulation", call);
+        return 0;
+    }
+    return allowed(m, call, modes);
+}
+
+#define ME_CHECK(call, modes) \
+    do { if (!me_allowed(m, call, modes)) return STATUS_ERROR; } while (0)
+/* where the states, derivatives and indicators can be read */
+#define ME_READ_MODES (MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_TERMINATED)
+
+static int me_count(ModelInstance *m, size_t given, size_t expected, const char *what, const char *call) {
+    if (given == expected) return 1;
+    fmu_fail(m, "%s: %zu %s requested; this FMU has %zu", call, given, what, expected);
+    return 0;
+}
+
+static Status me_get_states(ModelInstance *m, double x[], size_t nx, const char *call) {
+    ME_CHECK(call, ME_READ_MODES);
+    if (!me_count(m, nx, N_STATES, "continuous states", call)) return STATUS_ERROR;
+    if (refresh_outputs(m) != MODEL_OK) return STATUS_ERROR; /* in initialization mode: the initial state */
+    return model_get_continuous_states(m, x) == MODEL_OK ? STATUS_OK : STATUS_ERROR;
+}
+
+static Status me_set_states(ModelInstance *m, const double x[], size_t nx, const char *call) {
+    ME_CHECK(call, MODE_CONTINUOUS);
+    if (!me_count(m, nx, N_STATES, "continuous states", call)) return STATUS_ERROR;
+    if (model_set_continuous_states(m, x) != MODEL_OK) return STATUS_ERROR;
+    m->outputs_stale = 1;
+    return STATUS_OK;
+}
+
+static Status me_get_derivatives(ModelInstance *m, double dx[], size_t nx, const char *call) {
+    REPRS;
+    ME_CHECK(call, ME_READ_MODES);
+    if (!me_count(m, nx, N_STATES, "derivatives", call)) return STATUS_ERROR;
+    if (refresh_outputs(m) != MODEL_OK || model_get_derivatives(m, dx) != MODEL_OK) return STATUS_ERROR;
+    for (size_t i = 0; i < nx; i++)
+        if (!isfinite(dx[i])) {
+            fmu_fail(m, "%s: %s = %s at t = %s: the state or the inputs are out of range (the host's solver may "
+                     "have stepped too far, or the closed loop diverged)", call,
+                     EXTRA_NAMES[i], R(dx[i]), R(m->s->time));
+            return STATUS_ERROR;
+        }
+    return STATUS_OK;
+}
+
+static Status me_get_event_indicators(ModelInstance *m, double z[], size_t nz, const char *call) {
+    ME_CHECK(call, ME_READ_MODES);
+    if (!me_count(m, nz, N_EVENT_INDICATORS, "event indicators", call)) return STATUS_ERROR;
+    if (nz == 0) return STATUS_OK;
+    if (refresh_outputs(m) != MODEL_OK) return STATUS_ERROR;
+    return model_get_event_indicators(m, z) == MODEL_OK ? STATUS_OK : STATUS_ERROR;
+}
+
+static Status me_get_nominals(ModelInstance *m, double nominals[], size_t nx, const char *call) {
+    ME_CHECK(call, MODE_INSTANTIATED | ME_READ_MODES);
+    if (!me_count(m, nx, N_STATES, "nominals", call)) return STATUS_ERROR;
+    for (size_t i = 0; i < nx; i++) nominals[i] = 1.0; /* the states are O(1) in their units */
+    return STATUS_OK;
+}
+
+/* the event update (newDiscreteStates / updateDiscreteStates): one pass settles the model's
+ * discrete states (docs/model_exchange.md), so no further iteration is needed */
+static Status me_update_discrete_states(ModelInstance *m, int *states_changed, const char *call) {
+    ME_CHECK(call, MODE_EVENT);
+    *states_changed = 0;
+    if (refresh_outputs(m) != MODEL_OK) return STATUS_ERROR;
+    if (model_update_discrete_states(m, states_changed) != MODEL_OK) return STATUS_ERROR;
+    m->outputs_stale = 1;
+    return STATUS_OK;
+}
+
+static Status me_enter_event_mode(ModelInstance *m, const char *call) {
+    ME_CHECK(call, MODE_EVENT | MODE_CONTINUOUS);
+    m->mode = MODE_EVENT;
+    return STATUS_OK;
+}
+
+static Status me_enter_continuous_time_mode(ModelInstance *m, const char *call) {
+    ME_CHECK(call, MODE_EVENT);
+    m->mode = MODE_CONTINUOUS;
+    return STATUS_OK;
+}
+
+static Status me_completed_integrator_step(ModelInstance *m, const char *call) {
+    ME_CHECK(call, MODE_CONTINUOUS);
+    return STATUS_OK; /* nothing to do at an accepted step: no step events, no monitor (chatter: CS only) */
+}
+
+static Status me_set_time(ModelInstance *m, double time, const char *call) {
+    REPRS;
+    ME_CHECK(call, MODE_EVENT | MODE_CONTINUOUS);
+    if (!isfinite(time)) {
+        fmu_fail(m, "%s(%s) refused: the time must be finite", call, R(time));
+        return STATUS_ERROR;
+    }
+    m->s->time = time;
+    m->outputs_stale = 1;
+    return STATUS_OK;
+}
+
 #if FMI_VERSION == 2
 /* =================================================================== FMI 2.0 */
 #define M ((ModelInstance *)c)
@@ -524,9 +682,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     (void)fmuResourceLocation; (void)visible;
     Host host = {functions ? functions->logger : NULL, functions ? functions->componentEnvironment : NULL};
     const char *name = instanceName ? instanceName : "";
-    if (fmuType != fmi2CoSimulation) {
+    if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) {
         if (host.logger) host.logger(host.environment, name, fmi2Error, "logStatusError",
-                                     "this FMU supports co-simulation only");
+                                     "unknown fmuType: this FMU supports co-simulation and model exchange");
         return NULL;
     }
     if (!fmuGUID || strcmp(fmuGUID, MODEL_GUID) != 0) {
@@ -534,7 +692,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                                      "wrong GUID: this binary belongs to GUID " MODEL_GUID);
         return NULL;
     }
-    return create_instance(name, host, loggingOn);
+    return create_instance(name, host, loggingOn, fmuType == fmi2ModelExchange);
 }
 
 void fmi2FreeInstance(fmi2Component c) { free_instance(M); }
@@ -563,7 +721,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
 
 fmi2Status fmi2Terminate(fmi2Component c) {
     ModelInstance *m = M;
-    CHECK("fmi2Terminate", MODE_STEP);
+    CHECK("fmi2Terminate", INITIALIZED_MODES);
     m->mode = MODE_TERMINATED;
     return fmi2OK;
 }
@@ -638,38 +796,58 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
     UNSUPPORTED2("fmi2GetDirectionalDerivative");
 }
 
-/* model exchange: not supported */
-fmi2Status fmi2EnterEventMode(fmi2Component c) { UNSUPPORTED2("fmi2EnterEventMode"); }
-fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo) {
-    (void)eventInfo;
-    UNSUPPORTED2("fmi2NewDiscreteStates");
+/* model exchange */
+fmi2Status fmi2EnterEventMode(fmi2Component c) {
+    if (!c) return fmi2Error;
+    return me_enter_event_mode(M, "fmi2EnterEventMode");
 }
-fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) { UNSUPPORTED2("fmi2EnterContinuousTimeMode"); }
+fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo) {
+    if (!c || !eventInfo) return fmi2Error;
+    int changed = 0;
+    fmi2Status status = me_update_discrete_states(M, &changed, "fmi2NewDiscreteStates");
+    eventInfo->newDiscreteStatesNeeded = fmi2False;
+    eventInfo->terminateSimulation = fmi2False;
+    eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
+    eventInfo->valuesOfContinuousStatesChanged = changed ? fmi2True : fmi2False;
+    eventInfo->nextEventTimeDefined = fmi2False;
+    eventInfo->nextEventTime = 0.0;
+    return status;
+}
+fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) {
+    if (!c) return fmi2Error;
+    return me_enter_continuous_time_mode(M, "fmi2EnterContinuousTimeMode");
+}
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
-    (void)noSetFMUStatePriorToCurrentPoint; (void)enterEventMode; (void)terminateSimulation;
-    UNSUPPORTED2("fmi2CompletedIntegratorStep");
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!c) return fmi2Error;
+    if (enterEventMode) *enterEventMode = fmi2False;
+    if (terminateSimulation) *terminateSimulation = fmi2False;
+    return me_completed_integrator_step(M, "fmi2CompletedIntegratorStep");
 }
-fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) { (void)time; UNSUPPORTED2("fmi2SetTime"); }
+fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) {
+    if (!c) return fmi2Error;
+    return me_set_time(M, time, "fmi2SetTime");
+}
 fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx) {
-    (void)x; (void)nx;
-    UNSUPPORTED2("fmi2SetContinuousStates");
+    if (!c) return fmi2Error;
+    return me_set_states(M, x, nx, "fmi2SetContinuousStates");
 }
 fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx) {
-    (void)derivatives; (void)nx;
-    UNSUPPORTED2("fmi2GetDerivatives");
+    if (!c) return fmi2Error;
+    return me_get_derivatives(M, derivatives, nx, "fmi2GetDerivatives");
 }
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
-    (void)eventIndicators; (void)ni;
-    UNSUPPORTED2("fmi2GetEventIndicators");
+    if (!c) return fmi2Error;
+    return me_get_event_indicators(M, eventIndicators, ni, "fmi2GetEventIndicators");
 }
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
-    (void)x; (void)nx;
-    UNSUPPORTED2("fmi2GetContinuousStates");
+    if (!c) return fmi2Error;
+    return me_get_states(M, x, nx, "fmi2GetContinuousStates");
 }
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx) {
-    (void)x_nominal; (void)nx;
-    UNSUPPORTED2("fmi2GetNominalsOfContinuousStates");
+    if (!c) return fmi2Error;
+    return me_get_nominals(M, x_nominal, nx, "fmi2GetNominalsOfContinuousStates");
 }
 
 /* co-simulation */
@@ -732,10 +910,14 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage) {
-    (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
-    if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
-                               "this FMU supports co-simulation only");
-    return NULL;
+    (void)resourcePath; (void)visible;
+    Host host = {logMessage, instanceEnvironment};
+    if (!instantiationToken || strcmp(instantiationToken, MODEL_GUID) != 0) {
+        if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                                   "wrong instantiationToken: this binary belongs to " MODEL_GUID);
+        return NULL;
+    }
+    return create_instance(instanceName, host, loggingOn, 1);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -759,7 +941,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                    "wrong instantiationToken: this binary belongs to " MODEL_GUID);
         return NULL;
     }
-    return create_instance(instanceName, host, loggingOn);
+    return create_instance(instanceName, host, loggingOn, 0);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -771,7 +953,7 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
     (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
     (void)clockUpdate; (void)lockPreemption; (void)unlockPreemption;
     if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
-                               "this FMU supports co-simulation only");
+                               "this FMU supports co-simulation and model exchange, not scheduled execution");
     return NULL;
 }
 
@@ -793,11 +975,15 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
     return exit_initialization(m);
 }
 
-fmi3Status fmi3EnterEventMode(fmi3Instance instance) { UNSUPPORTED3("fmi3EnterEventMode"); }
+fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
+    if (instance && !M->model_exchange)
+        UNSUPPORTED3("fmi3EnterEventMode in co-simulation (hasEventMode is false)");
+    return me_enter_event_mode(M, "fmi3EnterEventMode");
+}
 
 fmi3Status fmi3Terminate(fmi3Instance instance) {
     ModelInstance *m = M;
-    CHECK("fmi3Terminate", MODE_STEP);
+    CHECK("fmi3Terminate", INITIALIZED_MODES);
     m->mode = MODE_TERMINATED;
     return fmi3OK;
 }
@@ -1006,48 +1192,67 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
                                     fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
                                     fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
                                     fmi3Float64 *nextEventTime) {
-    (void)discreteStatesNeedUpdate; (void)terminateSimulation; (void)nominalsOfContinuousStatesChanged;
-    (void)valuesOfContinuousStatesChanged; (void)nextEventTimeDefined; (void)nextEventTime;
-    UNSUPPORTED3("fmi3UpdateDiscreteStates (no event mode)");
+    if (instance && !M->model_exchange)
+        UNSUPPORTED3("fmi3UpdateDiscreteStates in co-simulation (hasEventMode is false)");
+    int changed = 0;
+    fmi3Status status = me_update_discrete_states(M, &changed, "fmi3UpdateDiscreteStates");
+    if (discreteStatesNeedUpdate) *discreteStatesNeedUpdate = fmi3False;
+    if (terminateSimulation) *terminateSimulation = fmi3False;
+    if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = fmi3False;
+    if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = changed ? fmi3True : fmi3False;
+    if (nextEventTimeDefined) *nextEventTimeDefined = fmi3False;
+    if (nextEventTime) *nextEventTime = 0.0;
+    return status;
 }
 
-/* model exchange: not supported */
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) { UNSUPPORTED3("fmi3EnterContinuousTimeMode"); }
+/* model exchange */
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
+    if (!instance) return fmi3Error;
+    return me_enter_continuous_time_mode(M, "fmi3EnterContinuousTimeMode");
+}
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation) {
-    (void)noSetFMUStatePriorToCurrentPoint; (void)enterEventMode; (void)terminateSimulation;
-    UNSUPPORTED3("fmi3CompletedIntegratorStep");
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!instance) return fmi3Error;
+    if (enterEventMode) *enterEventMode = fmi3False;
+    if (terminateSimulation) *terminateSimulation = fmi3False;
+    return me_completed_integrator_step(M, "fmi3CompletedIntegratorStep");
 }
-fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) { (void)time; UNSUPPORTED3("fmi3SetTime"); }
+fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {
+    if (!instance) return fmi3Error;
+    return me_set_time(M, time, "fmi3SetTime");
+}
 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
                                    size_t nContinuousStates) {
-    (void)continuousStates; (void)nContinuousStates;
-    UNSUPPORTED3("fmi3SetContinuousStates");
+    if (!instance) return fmi3Error;
+    return me_set_states(M, continuousStates, nContinuousStates, "fmi3SetContinuousStates");
 }
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
                                              size_t nContinuousStates) {
-    (void)derivatives; (void)nContinuousStates;
-    UNSUPPORTED3("fmi3GetContinuousStateDerivatives");
+    if (!instance) return fmi3Error;
+    return me_get_derivatives(M, derivatives, nContinuousStates, "fmi3GetContinuousStateDerivatives");
 }
 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[], size_t nEventIndicators) {
-    (void)eventIndicators; (void)nEventIndicators;
-    UNSUPPORTED3("fmi3GetEventIndicators");
+    if (!instance) return fmi3Error;
+    return me_get_event_indicators(M, eventIndicators, nEventIndicators, "fmi3GetEventIndicators");
 }
 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[], size_t nContinuousStates) {
-    (void)continuousStates; (void)nContinuousStates;
-    UNSUPPORTED3("fmi3GetContinuousStates");
+    if (!instance) return fmi3Error;
+    return me_get_states(M, continuousStates, nContinuousStates, "fmi3GetContinuousStates");
 }
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[], size_t nContinuousStates) {
-    (void)nominals; (void)nContinuousStates;
-    UNSUPPORTED3("fmi3GetNominalsOfContinuousStates");
+    if (!instance) return fmi3Error;
+    return me_get_nominals(M, nominals, nContinuousStates, "fmi3GetNominalsOfContinuousStates");
 }
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
-    (void)nEventIndicators;
-    UNSUPPORTED3("fmi3GetNumberOfEventIndicators");
+    if (!instance || !nEventIndicators) return fmi3Error;
+    *nEventIndicators = N_EVENT_INDICATORS;
+    return fmi3OK;
 }
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) {
-    (void)nContinuousStates;
-    UNSUPPORTED3("fmi3GetNumberOfContinuousStates");
+    if (!instance || !nContinuousStates) return fmi3Error;
+    *nContinuousStates = N_STATES;
+    return fmi3OK;
 }
 
 /* co-simulation */

@@ -1,8 +1,10 @@
-/* The FMI layer shared by the four native FMUs: the interface between it and a model.
+/* The FMI layer shared by the native FMUs: the interface between it and a model.
  *
  * The native edition of each FMU is one small model file (in plants/ or fmu_src/) plus
  * fmi_layer.c, compiled once for FMI 2.0 (-DFMI_VERSION=2) and once for FMI 3.0
- * (-DFMI_VERSION=3) co-simulation.  The build generates model_variables.h from the
+ * (-DFMI_VERSION=3); each binary serves co-simulation and model exchange (one
+ * modelDescription declares both, as the Modelica Reference-FMUs do; the same model
+ * functions serve both: docs/model_exchange.md).  The build generates model_variables.h from the
  * Python declaration table (the VARIABLES of each pythonfmu FMU class, see
  * build_native.py): value references VR_<name>, N_VARIABLES and the table of names,
  * causalities, starts and valid ranges that the layer validates with.
@@ -33,7 +35,10 @@ typedef struct {
 } VariableInfo;
 
 /* generated: MODEL_IDENTIFIER, MODEL_GUID, N_VARIABLES, VR_<name>, MODEL_FEEDTHROUGH,
- * MODEL_VARIABLES[] (the table) */
+ * MODEL_VARIABLES[] (the table); for model exchange N_STATES, N_EVENT_INDICATORS, N_LOCALS and
+ * the value references of the variables the description adds after the table (FMI 3.0's time
+ * is N_VARIABLES): der(<state>) from VR_FIRST_DERIVATIVE, the event indicators from
+ * VR_FIRST_EVENT_INDICATOR, the model's other locals from VR_FIRST_LOCAL, names in EXTRA_NAMES[] */
 #include "model_variables.h"
 
 /* Everything the FMU state holds (afc_slave_base TableSlave._state_names):
@@ -56,6 +61,7 @@ struct ModelInstance {
     int stale_on_set;      /* setting an input makes the outputs stale */
     int feedthrough;       /* some output depends directly on an input */
     int mode;              /* life-cycle state of the FMI layer */
+    int model_exchange;    /* instantiated for model exchange (else co-simulation) */
     int logging_on;
     char *instance_name;
     void *host;            /* the layer's logger and environment */
@@ -80,6 +86,20 @@ int model_step(ModelInstance *m, double current_time, double step_size);
 /* invalid combinations of individually valid parameters (cross_parameter_errors):
  * writes one message into message and returns MODEL_ERROR, else MODEL_OK */
 int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size);
+
+/* model exchange (docs/model_exchange.md): the continuous states x (N_STATES values, in the
+ * order of the description's derivatives), their derivatives at the instance's time, state and
+ * inputs, the event indicators z (N_EVENT_INDICATORS values, > 0 between events), the model's
+ * other locals (N_LOCALS values, e.g. a discrete mode), and the event update: the discrete
+ * states that follow the state, time and inputs at an event; *states_changed = 1 when it also
+ * set continuous states.  A co-simulation instance may be asked for derivatives, indicators
+ * and locals too (the variables are in its description): they describe what it integrates. */
+int model_get_continuous_states(ModelInstance *m, double x[]);
+int model_set_continuous_states(ModelInstance *m, const double x[]);
+int model_get_derivatives(ModelInstance *m, double dx[]);
+int model_get_event_indicators(ModelInstance *m, double z[]);
+int model_get_locals(ModelInstance *m, double values[]);
+int model_update_discrete_states(ModelInstance *m, int *states_changed);
 
 /* ---- provided by the layer ---- */
 /* log message with status Error ("<instance>: message"), return MODEL_ERROR (TableSlave.fail) */

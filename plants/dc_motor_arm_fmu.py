@@ -34,10 +34,11 @@ VARIABLES = (
     finite("x3_start", 0.0, "A", "initial armature current x3(0)"),
     positive("max_internal_step", 1e-4, "s", "largest internal RK4 step"),
     Variable("u", INPUT, 0.0, "V", "armature voltage (held over each communication step)"),
-    Variable("y", OUTPUT, 0.3, "rad", "arm angle x1"),
-    Variable("dy", OUTPUT, 0.0, "rad/s", "arm rate x2"),
-    Variable("d2y", OUTPUT, 0.0, "rad/s2", "arm acceleration dx2 = (Kt x3 - b x2 - m gv lc sin x1) / J"),
-    Variable("i", OUTPUT, 0.0, "A", "armature current x3"),
+    Variable("y", OUTPUT, 0.3, "rad", "arm angle x1", initial_depends_on=("x1_start",)),
+    Variable("dy", OUTPUT, 0.0, "rad/s", "arm rate x2", initial_depends_on=("x2_start",)),
+    Variable("d2y", OUTPUT, 0.0, "rad/s2", "arm acceleration dx2 = (Kt x3 - b x2 - m gv lc sin x1) / J",
+             initial_depends_on=("J", "b", "m", "lc", "gv", "Kt", "x1_start", "x2_start", "x3_start")),
+    Variable("i", OUTPUT, 0.0, "A", "armature current x3", initial_depends_on=("x3_start",)),
 )
 
 

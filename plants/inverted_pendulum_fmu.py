@@ -33,9 +33,9 @@ VARIABLES = (
                                  "0 case 1, 1 cases 2 and 3"),
     positive("max_internal_step", 1e-4, "s", "largest internal RK4 step"),
     Variable("u", INPUT, 0.0, "N", "force on the cart (held over each communication step)"),
-    Variable("y", OUTPUT, math.pi / 12, "rad", "pole angle x1 (from the vertical)"),
-    Variable("dy", OUTPUT, 0.0, "rad/s", "pole rate x2"),
-    Variable("d", OUTPUT, 0.0, "rad/s2", "disturbance d(t) added to dx2"),
+    Variable("y", OUTPUT, math.pi / 12, "rad", "pole angle x1 (from the vertical)", initial_depends_on=("x1_start",)),
+    Variable("dy", OUTPUT, 0.0, "rad/s", "pole rate x2", initial_depends_on=("x2_start",)),
+    Variable("d", OUTPUT, 0.0, "rad/s2", "disturbance d(t) added to dx2", initial_depends_on=("dist_gain",)),
 )
 
 

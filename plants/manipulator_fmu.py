@@ -37,10 +37,11 @@ VARIABLES = (
     finite("x2_start", 0.0, "rad/s", "initial link rate x2(0)"),
     positive("max_internal_step", 1e-4, "s", "largest internal RK4 step"),
     Variable("u", INPUT, 0.0, "N.m", "joint torque (held over each communication step)"),
-    Variable("y", OUTPUT, math.pi / 6, "rad", "link angle x1"),
-    Variable("dy", OUTPUT, 0.0, "rad/s", "link rate x2"),
-    Variable("d", OUTPUT, 0.0, "rad/s2", "friction term d = -(sgn(x2) cr + vr x2)/J in dx2"),
-    Variable("mr", OUTPUT, 5.0, "kg", "payload mass mr(t) = mr0 + mr1 sin t"),
+    Variable("y", OUTPUT, math.pi / 6, "rad", "link angle x1", initial_depends_on=("x1_start",)),
+    Variable("dy", OUTPUT, 0.0, "rad/s", "link rate x2", initial_depends_on=("x2_start",)),
+    Variable("d", OUTPUT, 0.0, "rad/s2", "friction term d = -(sgn(x2) cr + vr x2)/J in dx2",
+             initial_depends_on=("lr", "cr", "vr", "mr0", "mr1", "x2_start")),
+    Variable("mr", OUTPUT, 5.0, "kg", "payload mass mr(t) = mr0 + mr1 sin t", initial_depends_on=("mr0", "mr1")),
 )
 
 

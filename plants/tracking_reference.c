@@ -41,3 +41,36 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     (void)m; (void)current_time; (void)step_size;
     return MODEL_OK;
 }
+
+/* model exchange: no continuous states, no events (ym, dym, ddym are functions of time, e, de
+ * of the inputs: the outputs are all there is) */
+int model_get_continuous_states(ModelInstance *m, double x[]) {
+    (void)m; (void)x;
+    return MODEL_OK;
+}
+
+int model_set_continuous_states(ModelInstance *m, const double x[]) {
+    (void)m; (void)x;
+    return MODEL_OK;
+}
+
+int model_get_derivatives(ModelInstance *m, double dx[]) {
+    (void)m; (void)dx;
+    return MODEL_OK;
+}
+
+int model_get_event_indicators(ModelInstance *m, double z[]) {
+    (void)m; (void)z;
+    return MODEL_OK;
+}
+
+int model_get_locals(ModelInstance *m, double values[]) {
+    (void)m; (void)values;
+    return MODEL_OK;
+}
+
+int model_update_discrete_states(ModelInstance *m, int *states_changed) {
+    (void)m;
+    *states_changed = 0;
+    return MODEL_OK;
+}

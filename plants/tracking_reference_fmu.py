@@ -26,21 +26,26 @@ from afc_slave_base import TableSlave as Fmi2Slave
 _sin = math.sin
 _cos = math.cos
 
+REFERENCE_PARAMETERS = ("amplitude", "omega")  # ym, dym, ddym at the start time depend on these only
 VARIABLES = (
     finite("amplitude", math.pi / 6, "rad", "reference amplitude A of ym = A sin(omega t) "
                                             "(pendulum pi/6, manipulator 1)"),
     positive("omega", 1.0, "rad/s", "reference angular frequency omega"),
     Variable("y", INPUT, 0.0, "rad", "plant output y"),
     Variable("dy", INPUT, 0.0, "rad/s", "plant output rate dy"),
-    Variable("ym", OUTPUT, 0.0, "rad", "reference ym = A sin(omega t)"),
-    Variable("dym", OUTPUT, 0.0, "rad/s", "reference rate dym = A omega cos(omega t)"),
-    Variable("ddym", OUTPUT, 0.0, "rad/s2", "reference acceleration ddym = -A omega^2 sin(omega t)"),
-    Variable("e", OUTPUT, 0.0, "rad", "tracking error e = ym - y", depends_on=("y",)),
-    Variable("de", OUTPUT, 0.0, "rad/s", "tracking error rate de = dym - dy", depends_on=("dy",)),
+    Variable("ym", OUTPUT, 0.0, "rad", "reference ym = A sin(omega t)", initial_depends_on=REFERENCE_PARAMETERS),
+    Variable("dym", OUTPUT, 0.0, "rad/s", "reference rate dym = A omega cos(omega t)",
+             initial_depends_on=REFERENCE_PARAMETERS),
+    Variable("ddym", OUTPUT, 0.0, "rad/s2", "reference acceleration ddym = -A omega^2 sin(omega t)",
+             initial_depends_on=REFERENCE_PARAMETERS),
+    Variable("e", OUTPUT, 0.0, "rad", "tracking error e = ym - y", depends_on=("y",), dependency_kinds=("constant",),
+             initial_depends_on=(*REFERENCE_PARAMETERS, "y")),
+    Variable("de", OUTPUT, 0.0, "rad/s", "tracking error rate de = dym - dy", depends_on=("dy",),
+             dependency_kinds=("constant",), initial_depends_on=(*REFERENCE_PARAMETERS, "dy")),
     # appended for third-order plants (value references above unchanged)
     Variable("d2y", INPUT, 0.0, "rad/s2", "plant output acceleration d2y (third-order plants)"),
     Variable("d2e", OUTPUT, 0.0, "rad/s2", "tracking error acceleration d2e = ddym - d2y",
-             depends_on=("d2y",)),
+             depends_on=("d2y",), dependency_kinds=("constant",), initial_depends_on=(*REFERENCE_PARAMETERS, "d2y")),
 )
 
 

@@ -52,9 +52,10 @@ CYCLES_SCRIPT = textwrap.dedent("""
     print(json.dumps({"growth_kib": rss_kib() - before, "sys_path": len(sys.path), "classes": classes}))
 """)
 CYCLES, WARM_UP = 200, 100
-# pythonfmu 0.7's findClass leaks about 2-3 KiB per fmi2Instantiate that no FMU can avoid
-# (strings and lists it never releases); before the fix in afc_slave_base it also leaked
-# each re-created slave class, about 13 KiB per instantiate (2.6 MiB per 200 cycles).
+# pythonfmu 0.7's findClass leaks about 1 KiB per fmi2Instantiate that no FMU can avoid
+# (strings and lists it never releases; tests/test_memory_cycles.py measures it per cycle);
+# before the fix in afc_slave_base it also leaked each re-created slave class, about
+# 13 KiB per instantiate (2.6 MiB per 200 cycles).
 RSS_SLACK_KIB = 1536
 
 

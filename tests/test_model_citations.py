@@ -64,8 +64,10 @@ def problems_in(text: str, sections: dict, choice_titles: dict) -> list:
 def test_the_code_cites_the_model_and_not_the_working_notes():
     cited = [p for p in SOURCES if citations(p.read_text(errors="replace"))]
     assert len(cited) >= 15, [str(p.relative_to(ROOT)) for p in cited]
+    # the two tests that look for the word name it themselves (this one for code, test_docs.py for docs)
+    checkers = {Path(__file__), Path(__file__).with_name("test_docs.py")}
     spec = [str(p.relative_to(ROOT)) for p in SOURCES
-            if p != Path(__file__) and re.search(r"\bSPEC\b(?!\.md\" not in)", p.read_text(errors="replace"))]
+            if p not in checkers and re.search(r"\bSPEC\b(?!\.md\" not in)", p.read_text(errors="replace"))]
     assert not spec, f"cite docs/model.md sections instead of SPEC: {spec}"
 
 
