@@ -59,6 +59,7 @@ import fmpy
 import c_toolchain
 import fmu_catalog
 from c_toolchain import CFLAGS, WORK_DIR, NativeBuildError, compile_cached, compiler_available
+from fmu_src.afc_slave_base import INPUT, OUTPUT, PARAMETER, _unknown, initial_dependencies
 from fmu_catalog import FMI3_DIR, NATIVE_DIR, FmuSource, model_class
 from plants import registry as plant_registry
 
@@ -289,7 +290,6 @@ MODEL_EXCHANGE = {
 def _controller_model_exchange() -> ModelExchange:
     """theta1..thetaN (N = the table's rule weights) and w_hat: dtheta_j = gamma tau xi_j with the
     projection (31), dw_hat = gamma_w tau (variant 3; else 0); tau and xi depend on every input."""
-    from fmu_src.afc_slave_base import INPUT, OUTPUT, PARAMETER
     table = model_class("AdaptiveFuzzyController").VARIABLES
     inputs = tuple((v.name, "dependent") for v in table if v.causality == INPUT)
     parameters = tuple(v.name for v in table if v.causality == PARAMETER)
@@ -327,7 +327,6 @@ def add_model_exchange(root: ET.Element, model_identifier: str) -> ET.Element:
     states, <Derivatives>, and the derivatives' <InitialUnknowns> (their knowns in initialization
     mode: the initial dependencies of the states they depend on, their inputs and parameters).
     """
-    from fmu_src.afc_slave_base import _unknown, initial_dependencies
     declaration = model_exchange(model_identifier)
     table = model_class(model_identifier).VARIABLES
     rows = {v.name: v for v in table}

@@ -58,7 +58,7 @@ class Case:
 
     @property
     def scenario_name(self) -> str:
-        """The scenario's name; for a .toml path (a user's scenario), the file's stem."""
+        """The scenario's name; for a .toml path, the file's stem (regress names reference files after it)."""
         if isinstance(self.scenario, scenarios.Scenario):
             return self.scenario.name
         text = str(self.scenario)

@@ -19,7 +19,7 @@ from . import scenario as scenarios
 from .hosts import bench, engines, matrix, ssp
 from .master import ALGORITHMS, SimulationFailed, simulate
 from .scores import SCORE_KEYS, score_run
-from .studies import compat, mutation, regression, step_study, sweep, tables
+from .studies import compat, mutation, regression, step_study, sweep, tables, tune
 
 
 def _progress_bar(total: int, description: str, enabled: bool):
@@ -96,7 +96,7 @@ def register_run(commands):
 #: every subcommand, in the order of ``--help``: each lives in its own module with a ``register(commands)``
 SUBCOMMAND_REGISTRATIONS = (register_run, tables.register, step_study.register, sweep.register, regression.register,
                             ssp.register, engines.register, bench.register, mutation.register, matrix.register,
-                            compat.register)
+                            tune.register, compat.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -100,17 +100,24 @@ class Component:
     def fmi3(self) -> bool:
         return self.info.fmi_version.startswith("3")
 
-    def instantiate(self, logging_on: bool = False):
-        """Extract and instantiate; on failure the extraction is removed before the error propagates."""
-        self.unzip_dir = tempfile.mkdtemp(prefix=f"afc_{self.name}_")
+    def instantiate(self, logging_on: bool = False, extracted: str | None = None):
+        """Extract and instantiate; on failure the extraction is removed before the error propagates.
+
+        ``extracted``: a folder the FMU is already extracted to, kept by the caller (a study that runs the
+        same FMUs thousands of times extracts them once); it is neither written nor removed here.
+        """
+        self._owns_dir = extracted is None
+        self.unzip_dir = tempfile.mkdtemp(prefix=f"afc_{self.name}_") if extracted is None else str(extracted)
         try:
-            extract(str(self.info.path), self.unzip_dir)
+            if self._owns_dir:
+                extract(str(self.info.path), self.unzip_dir)
             if self.fmi3:
                 self._instantiate3(logging_on)
             else:
                 self._instantiate2(logging_on)
         except BaseException:
-            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            if self._owns_dir:
+                shutil.rmtree(self.unzip_dir, ignore_errors=True)
             raise
         return self
 
@@ -199,7 +206,8 @@ class Component:
         try:
             self.slave.freeInstance()
         finally:
-            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            if getattr(self, "_owns_dir", True):
+                shutil.rmtree(self.unzip_dir, ignore_errors=True)
 
     # -------------------------------------------------------------- per step
     def real_buffer(self, names) -> tuple:

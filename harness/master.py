@@ -240,12 +240,17 @@ class Master:
     """Instantiate, initialise and step the FMUs of one scenario."""
 
     def __init__(self, scenario: Scenario, algorithm: str = "feedthrough", fmu_paths: dict | None = None,
-                 logging_on: bool = True, loop: str = "auto"):
+                 logging_on: bool = True, loop: str = "auto", prepared: dict | None = None):
+        """``prepared``: {FMU path: (ModelInfo, folder it is extracted to)} kept by the caller for FMUs
+        it runs many times (harness/studies/tune.py); other FMUs are read and extracted per run."""
         if algorithm not in ALGORITHMS:
             raise ScenarioError(f"unknown algorithm {algorithm!r}; valid: {', '.join(ALGORITHMS)}")
         self.scenario, self.algorithm = scenario, algorithm
-        self.infos = {name: ModelInfo.read(resolve_fmu(spec.fmu, scenario, fmu_paths))
-                      for name, spec in scenario.components.items()}
+        paths = {name: resolve_fmu(spec.fmu, scenario, fmu_paths) for name, spec in scenario.components.items()}
+        prepared = prepared or {}
+        self.extracted = {name: prepared[path][1] for name, path in paths.items() if path in prepared}
+        self.infos = {name: prepared[path][0] if path in prepared else ModelInfo.read(path)
+                      for name, path in paths.items()}
         validate(scenario, self.infos)
         self.logging_on = logging_on
         self.loop = master_loop.choice(loop)  # "auto": the compiled loop if it can be built (master_loop.py)
@@ -337,7 +342,8 @@ class Master:
         self.rows_done = 0
         try:
             for name, spec in scenario.components.items():
-                component = Component(name, self.infos[name]).instantiate(logging_on=self.logging_on)
+                component = Component(name, self.infos[name]).instantiate(logging_on=self.logging_on,
+                                                                          extracted=self.extracted.get(name))
                 self.components[name] = component
             for name, spec in scenario.components.items():
                 component = self.components[name]

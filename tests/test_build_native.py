@@ -214,7 +214,7 @@ def test_native_fmus_are_ordinary_files(native, model):
 def test_the_editions_declare_the_same_variables(native, fmu_paths, model):
     python = _variables(fmu_paths[model])
     # beyond the table, the native edition declares its Model Exchange variables: der(x), event
-    # indicators and locals (tests/test_native_model_exchange.py checks them)
+    # indicators and locals (tests/test_model_exchange.py checks them)
     extras = build_native.model_exchange(model).extra_names()
     for version in (2, 3):
         described = _variables(native[model][version])
