@@ -20,7 +20,7 @@ from .cases import Progress
 from .hosts import bench, engines, matrix, ssp
 from .master import ALGORITHMS, SimulationFailed, simulate
 from .scores import SCORE_KEYS, score_run, value_text, why_none
-from .studies import mutation, regression, step_study, sweep, tables, tune
+from .studies import compat, mutation, regression, step_study, sweep, tables, tune
 
 
 def _progress(total: int, description: str, enabled: bool):
@@ -99,7 +99,7 @@ def register_run(commands):
 #: every subcommand, in the order of ``--help``: each lives in its own module with a ``register(commands)``
 SUBCOMMAND_REGISTRATIONS = (register_run, tables.register, step_study.register, sweep.register, regression.register,
                             ssp.register, engines.register, bench.register, mutation.register, matrix.register,
-                            tune.register)
+                            tune.register, compat.register)
 
 
 def build_parser() -> argparse.ArgumentParser:
