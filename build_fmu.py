@@ -166,7 +166,12 @@ def main(argv=None) -> int:
             editions.remove("native")
             print("note: native edition skipped (no C compiler): pip install -e '.[native]' to build it")
     for edition in editions:
-        for identifier, path in ensure_built(force=args.force, verbose=True, edition=edition).items():
+        try:
+            built = ensure_built(force=args.force, verbose=True, edition=edition)
+        except build_native.NativeBuildError as error:  # a declaration missing, the compiler's complaint
+            print(f"error: {error}", file=sys.stderr)
+            return 1
+        for identifier, path in built.items():
             print(f"{identifier} ({edition}): {path.relative_to(ROOT)}")
     if args.docs:
         for page, rewrite, what in ((MODEL_DOC, with_variable_tables, "variable tables"),

@@ -305,6 +305,10 @@ def model_exchange(model_identifier: str) -> ModelExchange:
     """The Model Exchange declaration of a native FMU."""
     if model_identifier == "AdaptiveFuzzyController":
         return _controller_model_exchange()
+    if model_identifier not in MODEL_EXCHANGE:  # a plant row of plants/registry.py without its entry here
+        raise NativeBuildError(f"build_native.py: MODEL_EXCHANGE has no entry for {model_identifier!r} (every FMU "
+                               "of plants/registry.py needs one: its continuous states and their derivatives, "
+                               "docs/model_exchange.md)")
     return MODEL_EXCHANGE[model_identifier]
 
 

@@ -10,6 +10,7 @@ from fmpy.validation import validate_fmu
 
 from fmu_src import afc_math
 import build_fmu
+from harness import variants
 from tests.fmu_helpers import Driven
 
 PARAMETERS = {v.name: v.start for v in build_fmu.model_class("AdaptiveFuzzyController").VARIABLES if v.causality == "parameter"}
@@ -132,12 +133,13 @@ def test_reset_then_rerun_gives_the_same_result(controller_fmu):
     c.free()
 
 
+NO_VARIANT = max(variants.CONTROLLER_VARIANTS.values()) + 1  # one past the registry's last row: out of range
 BAD_PARAMETERS = [
     ("lambda_ce", 0.0), ("lambda_ce", 1.0), ("lambda_ce", 1.5), ("lambda_ce", float("nan")),
     ("kappa1", 0.0), ("kappa2", -1.0), ("gamma", 0.0), ("gamma_w", -3.0), ("delta", 0.0),
     ("m_theta", -1.0), ("mf_slope", 0.0), ("E1", 0.0), ("E2", -1.0), ("q1", 0.0), ("q2", -2.0),
     ("k1", 0.0), ("k2", -1.0), ("lambda_e", -1.0), ("gamma", float("inf")), ("theta0", float("nan")),
-    ("variant", 0), ("variant", 4), ("fls_input", 0), ("fls_input", 3),
+    ("variant", 0), ("variant", NO_VARIANT), ("fls_input", 0), ("fls_input", 3),
 ]
 
 

@@ -12,6 +12,7 @@ import pytest
 
 import build_native
 from fmu_src import afc_math
+from harness import variants
 
 MAX_ORDER = 4
 MAX_SETS = 5
@@ -453,9 +454,10 @@ def c_parameters(p):
 @pytest.mark.parametrize("order,sets", SHAPES)
 def test_latch_error_and_the_control_law_are_the_python_ones(afc, order, sets):
     """latch_error (e(t0), t0, the Remark 3 polynomials) and controller_output (u, E, alpha, xi)
-    for the three variants and both FLS inputs, theta beyond +-M_theta, w_hat != 0."""
+    for every variant of the registry (harness/variants.py) and both FLS inputs, theta beyond +-M_theta,
+    w_hat != 0."""
     rng = random.Random(300 + 10 * order + sets)
-    for variant in (afc_math.VARIANT_VUD, afc_math.VARIANT_FIXED, afc_math.VARIANT_FAE):
+    for variant in variants.CONTROLLER_VARIANTS.values():
         fls_input = afc_math.FLS_INPUT_STATE if variant == afc_math.VARIANT_FIXED else afc_math.FLS_INPUT_ERROR
         values = parameter_values(order=order, sets=sets, variant=variant, fls_input=fls_input, k1=4.0, k2=6.0,
                                   k3=4.0, k4=1.0, q1=7.0, q2=4.0, q3=2.0, q4=9.0, kappa1=10.0, kappa2=3.0,

@@ -17,6 +17,7 @@ from fmpy.fmi1 import FMICallException
 
 import build_fmu
 import build_native
+from harness import variants
 from tests.fmu_helpers import Driven
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -392,7 +393,7 @@ def test_the_editions_warn_in_the_same_words(native, fmu_paths, host):
     assert warnings["native"] == warnings["python"]
 
 
-@pytest.mark.parametrize("variant", [1, 2, 3])
+@pytest.mark.parametrize("variant", variants.CONTROLLER_VARIANTS.values(), ids=variants.NAMES)
 def test_the_native_controller_matches_the_python_one_bit_for_bit(native, fmu_paths, variant):
     traces = []
     for path in (fmu_paths["AdaptiveFuzzyController"], native["AdaptiveFuzzyController"][2]):

@@ -3,6 +3,8 @@ from pathlib import Path
 
 import pytest
 
+import build_fmu
+import build_native
 import fmu_catalog
 from plants import registry
 
@@ -33,8 +35,28 @@ def test_each_rows_files_exist_and_its_class_loads(row):
 def test_an_unknown_identifier_names_the_valid_ones():
     with pytest.raises(KeyError, match="unknown FMU 'Nope'; valid: .*'InvertedPendulum'"):
         fmu_catalog.fmu("Nope")
-    with pytest.raises(ValueError, match="the oracle knows InvertedPendulum and Manipulator, not 'DcMotorArm'"):
+    known = " and ".join(row.model_identifier for row in registry.PLANT_FMUS if row.oracle is not None)
+    assert known.startswith("InvertedPendulum and Manipulator")  # the paper's plants, and any row with an oracle
+    with pytest.raises(ValueError, match=f"the oracle knows {known}, not 'DcMotorArm'"):
         registry.oracle_model("DcMotorArm", {})
+
+
+def test_every_plant_row_declares_its_model_exchange_interface(monkeypatch, capsys):
+    """The native build's Model Exchange table (build_native.MODEL_EXCHANGE) has an entry per registry row;
+    a row without one stops the build with one line naming the table, not a KeyError."""
+    for row in registry.PLANT_FMUS:
+        me = build_native.model_exchange(row.model_identifier)
+        assert len(me.states) == (row.order or 0), row.model_identifier  # y, dy, ... of an RK4 plant; none else
+    monkeypatch.delitem(build_native.MODEL_EXCHANGE, "Manipulator")
+    with pytest.raises(build_native.NativeBuildError, match="MODEL_EXCHANGE has no entry for 'Manipulator'"):
+        build_native.model_guid("Manipulator")  # where a build of the native FMU first asks for it
+    # the build command says so in one line (the build itself is not run: its first step, the GUID, fails)
+    monkeypatch.setattr(build_native, "compiler_available", lambda: True)
+    monkeypatch.setattr(build_fmu, "ensure_built", lambda **_: build_native.model_guid("Manipulator"))
+    assert build_fmu.main(["--edition", "native"]) == 1
+    error = capsys.readouterr().err
+    assert error.startswith("error: build_native.py: MODEL_EXCHANGE has no entry for 'Manipulator'")
+    assert "Traceback" not in error and len(error.strip().splitlines()) == 1
 
 
 def test_the_oracle_models_are_the_plants_own_functions():

@@ -10,6 +10,7 @@ import pytest
 
 import build_fmu
 from harness import scenario as scenarios
+from harness import variants
 from harness.cli import main as cli_main
 from harness.master import Master, SimulationFailed, simulate
 from harness.studies.oracle import simulate_oracle
@@ -172,7 +173,10 @@ def test_algebraic_loop_is_a_clear_error(fmu_paths, tmp_path):
 
 
 def test_unknown_scenario_and_controller_list_valid_names():
-    with pytest.raises(ScenarioError, match="valid: manipulator, motor_arm, pendulum_case1"):
+    names = scenarios.scenario_names()  # every scenario file, sorted; the variant registry's names, in its order
+    assert {"manipulator", "motor_arm", "pendulum_case1"} <= set(names) and names == sorted(names)
+    with pytest.raises(ScenarioError, match=f"; valid: {re.escape(', '.join(names))} or a .toml path$"):
         scenarios.load("pendulum_case9")
-    with pytest.raises(ScenarioError, match="valid: vud, fixed, fae"):
+    assert variants.NAMES[:3] == ("vud", "fixed", "fae")
+    with pytest.raises(ScenarioError, match=f"; valid: {re.escape(', '.join(variants.NAMES))}$"):
         scenarios.load("pendulum_case1").with_controller("pid")

@@ -24,8 +24,11 @@ if str(ROOT) not in sys.path:
 import build_fmu  # noqa: E402
 from tests.fmu_helpers import Driven  # noqa: E402
 from plants import inverted_pendulum_model, manipulator_model, plant_integration  # noqa: E402
+from plants import registry as plant_registry  # noqa: E402
 
-PLANTS = ("InvertedPendulum", "Manipulator", "TrackingReference")
+#: every FMU of the plant registry: a new row is tested here as soon as it is added (its STATE_CASES
+#: entry and its dependencies below are then required)
+PLANTS = tuple(row.model_identifier for row in plant_registry.PLANT_FMUS)
 RTOL, ATOL = 1e-10, 1e-12  # solve_ivp reference tolerances
 
 
@@ -370,6 +373,7 @@ STATE_CASES = {
     "InvertedPendulum": (dict(dist_gain=1.0, mp=1.0, max_internal_step=2e-4), ("y", "dy", "d")),
     "Manipulator": (dict(mr1=3.0, cr=2.0), ("y", "dy", "d", "mr")),
     "TrackingReference": (dict(amplitude=1.0, omega=2.0), ("ym", "dym", "ddym", "e", "de")),
+    "DcMotorArm": (dict(b=0.3, L=0.2, x3_start=0.1), ("y", "dy", "d2y", "i")),
 }
 
 

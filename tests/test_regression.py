@@ -10,6 +10,8 @@ import os
 import numpy as np
 import pytest
 
+from harness import scenario as scenarios
+from harness import variants
 from harness.studies import regression
 from harness.cli import main as cli_main
 from harness.studies.regression import Case, CaseRun
@@ -30,11 +32,12 @@ def test_all_twelve_cases_stay_inside_their_reference_tubes(regression_runs, tmp
     paper = {(n, c) for n in ("pendulum_case1", "pendulum_case2", "pendulum_case3", "manipulator")
              for c in ("vud", "fixed", "fae")}
     assert paper <= {(c.scenario, c.controller) for c in cases}
-    assert len(cases) == 15  # the paper's 12 and the third-order plant's 3 (motor_arm, issue 17)
+    # every scenario file x every variant of the registry (the paper's 12 and motor_arm's 3, issue 17)
+    assert len(cases) == len(scenarios.scenario_names()) * len(variants.NAMES) >= 15
     outcome = regression.regress(cases, runs=[regression_runs[c] for c in cases], report_dir=tmp_path)
     table = "\n".join(" | ".join(map(str, row)) for row in regression.summary_rows(outcome.comparisons))
     assert outcome.passed, f"regression failed (see {tmp_path / 'report.md'}):\n{table}"
-    assert "15/15 cases pass" in (tmp_path / "report.md").read_text()
+    assert f"{len(cases)}/{len(cases)} cases pass" in (tmp_path / "report.md").read_text()
 
 
 def test_gamma_290_instead_of_300_fails_and_the_unchanged_case_passes(regression_runs, tmp_path):
@@ -62,12 +65,18 @@ def fabricated_run(case=Case("pendulum_case1", "vud"), scale=1.0, step=None) -> 
                    reference.time.copy(), signals, 0.0)
 
 
+def test_every_reference_file_is_a_case_of_the_registries():
+    """A reference without its scenario file or its variant row (harness/variants.py) is stale or orphaned."""
+    expected = {path.name for case in regression.all_cases() for path in regression.reference_paths(case)}
+    assert {path.name for path in regression.REFERENCE_DIR.glob("*_ref.*")} == expected
+
+
 def test_every_reference_is_committed_small_and_described():
-    total = 0
     for case in regression.all_cases():
         csv_path, json_path = regression.reference_paths(case)
         assert csv_path.exists() and json_path.exists(), f"missing reference for {case.name}"
-        total += csv_path.stat().st_size + json_path.stat().st_size
+        size = csv_path.stat().st_size + json_path.stat().st_size  # 15 cases once stayed under 5 MB together
+        assert size < 3e5, f"{case.name}: {size} bytes of reference (the budget is 300 kB a case)"
         header = csv_path.read_text().splitlines()[0]
         assert header == ",".join(f'"{n}"' for n in ["time", *regression.SIGNALS])
         meta = json.loads(json_path.read_text())
@@ -79,7 +88,6 @@ def test_every_reference_is_committed_small_and_described():
         reference = regression.read_reference(case)
         assert len(reference.time) == regression.POINTS and reference.time[-1] == 20.0
         assert all(np.all(np.isfinite(v)) for v in reference.signals.values())
-    assert total < 5e6
 
 
 def test_missing_reference_fails_with_the_hint_and_a_plain_run_writes_nothing(tmp_path):
@@ -141,4 +149,5 @@ def test_the_references_hold_for_the_native_edition(edition, tmp_path, capsys):
     if not build_native.compiler_available():
         pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
     assert cli_main(["regress", "--edition", edition, "--report", str(tmp_path)]) == 0
-    assert "15/15 cases pass" in capsys.readouterr().out
+    count = len(regression.all_cases())
+    assert f"{count}/{count} cases pass" in capsys.readouterr().out

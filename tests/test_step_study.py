@@ -1,4 +1,5 @@
 """The step study by accuracy (harness/studies/step_study.py): search, criterion, outputs, and what uses it."""
+import copy
 import json
 import math
 import re
@@ -10,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from harness import scenario as scenarios
+from harness import variants
 from harness.studies import step_study
 from harness.cli import main as cli_main
 
@@ -112,6 +114,38 @@ def test_quick_study_writes_only_into_its_output_folder(fmu_paths, tmp_path):
 
 def test_apply_needs_the_full_study(tmp_path):
     assert cli_main(["convergence", "pendulum_case1", "--quick", "--apply", "--out", str(tmp_path)]) == 2
+
+
+def test_apply_of_one_scenario_keeps_every_other_scenarios_entry(tmp_path, monkeypatch, capsys):
+    """A new plant's recipe runs `convergence NAME --apply`: the committed entries of the others stay."""
+    committed = step_study.load_convergence()
+    scenario_dir = tmp_path / "scenarios"
+    scenario_dir.mkdir()
+    (scenario_dir / "pendulum_case1.toml").write_text((scenarios.SCENARIO_DIR / "pendulum_case1.toml").read_text())
+    monkeypatch.setattr(scenarios, "SCENARIO_DIR", scenario_dir)
+    monkeypatch.setattr(step_study, "CONVERGENCE_JSON", tmp_path / "convergence.json")
+    monkeypatch.setattr(step_study, "CONVERGENCE_MD", tmp_path / "convergence.md")
+    step_study.CONVERGENCE_JSON.write_text(json.dumps(committed))
+    entry = copy.deepcopy(committed["scenarios"]["pendulum_case1"])
+    for controller in step_study.CONTROLLERS:  # --apply takes a study of every variant (a new one: as vud)
+        entry["controllers"].setdefault(controller, entry["controllers"][variants.PROPOSED])
+    one = dict(committed, scenarios={"pendulum_case1": entry}, wall_s=12.0)
+    (tmp_path / "one.json").write_text(json.dumps(one))
+    assert cli_main(["convergence", "pendulum_case1", "--from-json", str(tmp_path / "one.json"), "--apply",
+                     "--out", str(tmp_path / "out")]) == 0
+    written = json.loads(step_study.CONVERGENCE_JSON.read_text())
+    assert list(written["scenarios"]) == [*(n for n in committed["scenarios"] if n != "pendulum_case1"),
+                                          "pendulum_case1"]
+    others = [name for name in committed["scenarios"] if name != "pendulum_case1"]
+    assert others and all(written["scenarios"][name] == committed["scenarios"][name] for name in others)
+    assert written["scenarios"]["pendulum_case1"] == entry
+    assert written["studied"] == ["pendulum_case1"] and written["wall_s"] == 12.0
+    text = step_study.CONVERGENCE_MD.read_text()
+    assert f"(the last run, of pendulum_case1: 12 s wall on 2 cores shared with other jobs; {', '.join(others)} " \
+           "from earlier runs of the study, horizon" in text
+    assert all(f"## {name}" in text for name in committed["scenarios"])
+    assert "out/convergence.json" in capsys.readouterr().out  # the study itself, unmerged, in --out
+    assert list(json.loads((tmp_path / "out" / "convergence.json").read_text())["scenarios"]) == ["pendulum_case1"]
 
 
 # ------------------------------------------------------ the committed study

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from harness import variants
 from harness.studies import sweep, sweep_csv, sweep_executors, sweep_grid, sweep_heatmap
 from harness.cli import main as cli_main
 from harness.scenario import ScenarioError
@@ -93,7 +94,8 @@ def test_local_pool_sweep_records_every_point_with_scores_or_a_reason(fmu_paths,
     header, rows = rows_of(out / "sweep.csv")
     assert header == ["controller", "plant.mp", "controller.gamma", "ts", "es1_pct", "es2_pct", "ITAE", "IAE",
                       "Ec", "umax", "tv_u", "wall_s", "status", "reason"]
-    assert len(rows) == 12
+    assert len(rows) == 4 * len(variants.NAMES)  # --controller all: every variant of the registry x 4 points
+    assert {key[0] for key in rows} == set(variants.NAMES)
     statuses = {key: cells[-2] for key, cells in rows.items()}
     assert all(statuses[(c, m, "300.0")] == "ok" for c in ("vud", "fixed", "fae") for m in ("0.1", "1.0"))
     assert all(statuses[(c, "0.1", "300000.0")] == "diverged" for c in ("vud", "fixed", "fae"))

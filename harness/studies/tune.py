@@ -1782,8 +1782,9 @@ def bench(args) -> int:
 
 
 def compare_command(args, out: Path, log) -> int:
-    """``--compare``: vud, fixed and fae tuned with the same budget on each scenario, ``--repeats`` seeds."""
-    controllers = variants.NAMES
+    """``--compare``: vud, fixed and fae (the paper's variants) tuned with the same budget on each scenario,
+    ``--repeats`` seeds."""
+    controllers = variants.PAPER
     objective = score_name(args.objective)
     seeds = [args.seed + r for r in range(args.repeats)]
     plan = []
