@@ -134,3 +134,12 @@ def test_model_doc_scenario_table_matches_the_scenario_files():
         configured = scenarios.load(name)
         assert float(step) == configured.step, f"docs/model.md: {name} step {step}, scenario file {configured.step}"
         assert configured.start == 0.0 and configured.stop == 20.0  # "All run from 0 to 20 s"
+
+
+def test_the_tests_readme_maps_every_test_file():
+    """tests/README.md "maps every file to what it covers": a new test file (a new study's, host's) gets its row."""
+    text = (ROOT / "tests" / "README.md").read_text()
+    rows = set(re.findall(r"(?m)^\| \(?`(test_\w+\.py)`\)? \|", text))
+    files = {path.name for path in (ROOT / "tests").glob("test_*.py")}
+    assert not files - rows, f"tests/README.md: no row for {sorted(files - rows)}"
+    assert not rows - files, f"tests/README.md: rows for missing files {sorted(rows - files)}"
