@@ -60,6 +60,7 @@ class RunResult:
     wall_s: float
     complete: bool
     loop_s: float = float("nan")  # the fixed-step loop alone (no instantiation, initialisation, clean-up)
+    solver: dict | None = None  # --algorithm me: the integrator's statistics (harness/me_master.py)
 
     @property
     def rows(self) -> int:
