@@ -22,7 +22,7 @@ from .master import SimulationFailed
 from .me_master import ALGORITHM as MODEL_EXCHANGE
 from .me_master import DEFAULT_RTOL
 from .scores import SCORE_KEYS, score_run
-from .studies import mutation, regression, step_study, sweep, tables
+from .studies import me_accuracy, mutation, regression, step_study, sweep, tables, work_precision
 
 
 def _progress_bar(total: int, description: str, enabled: bool):
@@ -121,8 +121,9 @@ def register_run(commands):
 
 
 #: every subcommand, in the order of ``--help``: each lives in its own module with a ``register(commands)``
-SUBCOMMAND_REGISTRATIONS = (register_run, tables.register, step_study.register, sweep.register, regression.register,
-                            ssp.register, engines.register, bench.register, mutation.register, matrix.register)
+SUBCOMMAND_REGISTRATIONS = (register_run, tables.register, step_study.register, me_accuracy.register,
+                            work_precision.register, sweep.register,
+                            regression.register, ssp.register, engines.register, bench.register, mutation.register, matrix.register)
 
 
 def build_parser() -> argparse.ArgumentParser:
