@@ -21,6 +21,7 @@ other jobs they still vary by some 10-30 %.  The figure and the table go to resu
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -231,10 +232,16 @@ def work_precision_command(args) -> int:
     return 0
 
 
+def _ladder_scenario(text: str) -> str:
+    if text not in LADDERS:
+        raise argparse.ArgumentTypeError(f"no step ladders for {text!r}; valid: {', '.join(LADDERS)}")
+    return text
+
+
 def register(commands):
     command = commands.add_parser("work-precision", help="ITAE error against CPU time: co-simulation (feedthrough, "
                                                          "Jacobi) step ladders and Model Exchange tolerance ladders")
-    command.add_argument("scenarios", nargs="*", choices=list(LADDERS), metavar="SCENARIO",
+    command.add_argument("scenarios", nargs="*", type=_ladder_scenario, metavar="SCENARIO",
                          help=f"default: {', '.join(LADDERS)}")
     command.add_argument("--repeat", type=cli_args.positive_int, default=3,
                          help="runs per point, the fastest counts (default 3; runs over 2 s once)")
