@@ -39,3 +39,23 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys):
     assert all(r["scenario"] == "motor_arm" and r["status"] == "ok" and float(r["ITAE"]) > 0 for r in beyond)
     assert "## Beyond the paper: a third-order plant" in report and "| vud | 3 (27) |" in report
 
+
+
+def test_tables_in_model_exchange_decide_the_claims_on_tolerance_ladders(tmp_path, capsys, monkeypatch):
+    import pytest
+
+    import build_native
+
+    if not build_native.compiler_available():
+        pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
+    code = cli_main(["tables", "--edition", "native", "--algorithm", "me", "--rtol", "1e-8", "--out", str(tmp_path),
+                     "--stop", "0.3", "--jobs", "2", "--refine", "0"])
+    assert code == 0, capsys.readouterr().err
+    with open(tmp_path / "table2.csv") as stream:
+        rows = list(csv.DictReader(stream))
+    assert all(r["status"] == "ok" and r["validated_step"] == "" for r in rows)
+    report = (tmp_path / "report.md").read_text()
+    assert "one Model Exchange run (the native FMUs integrated together by CVODE, rtol 1e-08" in report
+    assert "tolerance ladders" in report and report.count(" ± ") >= 8 * 3
+    assert cli_main(["tables", "--rtol", "1e-8", "--out", str(tmp_path), "--stop", "0.1"]) == 2
+    assert "--rtol is the tolerance of --algorithm me" in capsys.readouterr().err
