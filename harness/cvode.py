@@ -62,6 +62,8 @@ CVodeSetLinearSolver = _bind(_cvode, "CVodeSetLinearSolver", _int, _void, _void,
 CVode = _bind(_cvode, "CVode", _int, _void, _double, _void, _c.POINTER(_double), _int)
 CVodeGetDky = _bind(_cvode, "CVodeGetDky", _int, _void, _double, _int, _void)
 CVodeGetRootInfo = _bind(_cvode, "CVodeGetRootInfo", _int, _void, _c.POINTER(_int))
+CVodeGetLastOrder = _bind(_cvode, "CVodeGetLastOrder", _int, _void, _c.POINTER(_int))
+CVodeGetCurrentTime = _bind(_cvode, "CVodeGetCurrentTime", _int, _void, _c.POINTER(_double))
 CVodeGetReturnFlagName = _bind(_cvode, "CVodeGetReturnFlagName", _c.c_char_p, _long)
 CVodeFree = _bind(_cvode, "CVodeFree", None, _c.POINTER(_void))
 _COUNTERS = {name: _bind(_cvode, f"CVodeGet{name}", _int, _void, _c.POINTER(_long))
@@ -72,8 +74,7 @@ STATISTICS = {"steps": ("NumSteps",), "derivative_evaluations": ("NumRhsEvals", 
               "jacobians": ("NumJacEvals",), "root_evaluations": ("NumGEvals",),
               "error_test_failures": ("NumErrTestFails",), "convergence_failures": ("NumNonlinSolvConvFails",)}
 
-#: what the C side needs to step and interpolate (harness/me_loop.c)
-FUNCTION_ADDRESSES = {"CVode": "CVode", "CVodeGetDky": "CVodeGetDky", "N_VGetArrayPointer": "N_VGetArrayPointer"}
+MAX_ORDER = 5  # BDF's highest order: the interpolant has at most 6 Taylor coefficients
 
 
 def address_of(name: str) -> int:
@@ -163,6 +164,25 @@ class Cvode:
     def interpolate(self, t: float) -> int:
         """The solution at ``t`` inside the last step into ``self.interpolated`` (CVODE's interpolant)."""
         return CVodeGetDky(self.memory, t, 0, self._interpolated)
+
+    def taylor(self, coefficients) -> tuple:
+        """The interpolant of the last step as a Taylor polynomial about the time ``tn`` CVODE reached:
+        ``coefficients[k] = y^(k)(tn) / k!`` (a numpy array of MAX_ORDER + 1 rows); returns (status, tn,
+        order).  harness/me_loop.c computes the same (me_loop_run), so both loops evaluate the same
+        polynomial with the same operations: Horner in t - tn."""
+        order, tn = _int(), _double()
+        CVodeGetLastOrder(self.memory, _c.byref(order))
+        CVodeGetCurrentTime(self.memory, _c.byref(tn))
+        factorial = 1.0
+        for k in range(order.value + 1):
+            status = CVodeGetDky(self.memory, tn.value, k, self._interpolated)
+            if status < 0:
+                return status, tn.value, order.value
+            if k:
+                factorial *= k
+            coefficients[k] = self.interpolated[:self.n]
+            coefficients[k] /= factorial
+        return 0, tn.value, order.value
 
     @property
     def interpolated_address(self) -> int:

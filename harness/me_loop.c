@@ -47,6 +47,10 @@ typedef void *N_Vector;
 typedef int (*CVodeCall)(void *memory, double tout, N_Vector yout, double *tret, int itask);
 typedef int (*CVodeGetDkyCall)(void *memory, double t, int k, N_Vector dky);
 typedef double *(*GetArrayPointerCall)(N_Vector vector);
+typedef int (*CVodeGetLastOrderCall)(void *memory, int *order);
+typedef int (*CVodeGetCurrentTimeCall)(void *memory, double *time);
+
+#define MAX_ORDER 5 /* BDF's highest order */
 
 enum { ACTION_READ = 0, ACTION_WRITE = 1 };
 
@@ -125,6 +129,9 @@ typedef struct {
     void *cvode;
     void *get_dky;
     void *get_array_pointer;
+    void *get_last_order;
+    void *get_current_time;
+    double *taylor;     /* (MAX_ORDER + 1) x states: the last step's interpolant, y^(k)(tn) / k! */
     double *record;
     size_t columns;
     const double *column_bounds;
@@ -241,7 +248,7 @@ static int record_within_bounds(const double *record, size_t columns, const doub
  * Steps from the current state towards `target` until row `last_row` is recorded (a block: the
  * progress interval), an event needs the master, or something fails.  `row` is the next row to
  * record.  After each step every grid row t_row = start + row * step <= t reached is recorded
- * from CVODE's interpolant; then the step is an event when CVode returned a root, when t reached
+ * from the step's interpolant (its Taylor polynomial about tn); then the step is an event when CVode returned a root, when t reached
  * `next_event` (a time event), or after every step when `every_step` (an FMU needs
  * CompletedIntegratorStep).
  */
@@ -262,17 +269,36 @@ EXPORT int me_loop_run(MeLoop *m, double target, double next_event, int32_t ever
             outcome->outcome = LOOP_SOLVER_FAILED;
             return LOOP_SOLVER_FAILED;
         }
+        double tn = 0.0;
+        int order = 0;
+        if (row < m->rows && m->start + (double)row * m->step <= reached) {
+            /* the interpolant as a Taylor polynomial about tn (Cvode.taylor in harness/cvode.py) */
+            ((CVodeGetLastOrderCall)m->get_last_order)(m->cvode_memory, &order);
+            ((CVodeGetCurrentTimeCall)m->get_current_time)(m->cvode_memory, &tn);
+            double factorial = 1.0;
+            for (int k = 0; k <= order; k++) {
+                int status = get_dky(m->cvode_memory, tn, k, m->interpolated);
+                if (status < 0) {
+                    outcome->row = row;
+                    outcome->status = status;
+                    outcome->outcome = LOOP_SOLVER_FAILED;
+                    return LOOP_SOLVER_FAILED;
+                }
+                if (k) factorial *= (double)k;
+                const double *derivative = data(m->interpolated);
+                double *coefficient = m->taylor + (size_t)k * m->states;
+                for (size_t i = 0; i < m->states; i++) coefficient[i] = derivative[i] / factorial;
+            }
+        }
         while (row < m->rows) {
             double t = m->start + (double)row * m->step;
             if (!(t <= reached)) break;
-            int status = get_dky(m->cvode_memory, t, 0, m->interpolated);
-            if (status < 0) {
-                outcome->row = row;
-                outcome->status = status;
-                outcome->outcome = LOOP_SOLVER_FAILED;
-                return LOOP_SOLVER_FAILED;
+            double dt = t - tn;  /* Horner: x = ((c_q dt + c_q-1) dt + ...) dt + c_0 */
+            memcpy(m->x, m->taylor + (size_t)order * m->states, m->states * sizeof(double));
+            for (int k = order - 1; k >= 0; k--) {
+                const double *coefficient = m->taylor + (size_t)k * m->states;
+                for (size_t i = 0; i < m->states; i++) m->x[i] = m->x[i] * dt + coefficient[i];
             }
-            memcpy(m->x, data(m->interpolated), m->states * sizeof(double));
             int what = set_point(m, t, outcome);
             if (what != LOOP_DONE) {
                 outcome->row = row;

@@ -19,6 +19,8 @@ import ctypes
 import sys
 from pathlib import Path
 
+import numpy as np
+
 import c_toolchain
 
 from . import cvode, master_loop
@@ -57,7 +59,7 @@ class MeLoop(ctypes.Structure):
                 ("blocks", _void), ("block_count", _size), ("x", _void), ("dx", _void), ("z", _void),
                 ("states", _size), ("indicators", _size), ("cvode_memory", _void), ("y", _void),
                 ("interpolated", _void), ("cvode", _void), ("get_dky", _void), ("get_array_pointer", _void),
-                ("record", _void), ("columns", _size), ("column_bounds", _void), ("check_every", ctypes.c_int64),
+                ("get_last_order", _void), ("get_current_time", _void), ("taylor", _void), ("record", _void), ("columns", _size), ("column_bounds", _void), ("check_every", ctypes.c_int64),
                 ("rows", ctypes.c_int64), ("start", ctypes.c_double), ("step", ctypes.c_double),
                 ("failure", Outcome), ("evaluations", ctypes.c_int64)]
 
@@ -139,6 +141,10 @@ class CompiledIntegration:
         loop.cvode = cvode.address_of("CVode")
         loop.get_dky = cvode.address_of("CVodeGetDky")
         loop.get_array_pointer = cvode.address_of("N_VGetArrayPointer")
+        loop.get_last_order = cvode.address_of("CVodeGetLastOrder")
+        loop.get_current_time = cvode.address_of("CVodeGetCurrentTime")
+        self.taylor = np.zeros((cvode.MAX_ORDER + 1, max(states, 1)))
+        loop.taylor = self.taylor.ctypes.data
         loop.record, loop.columns = record.ctypes.data, record.shape[1]
         loop.column_bounds = ctypes.addressof(self.column_bounds)
         loop.check_every, loop.rows = check_every, record.shape[0]

@@ -316,6 +316,8 @@ class ModelExchangeMaster(Master):
                       last_row: int) -> tuple:
         """harness/me_loop.c's me_loop_run in Python: (CVode's flag or None, time reached, next row)."""
         solver, rows = self.solver, len(record)
+        if getattr(self, "_taylor", None) is None or self._taylor.shape[1] != max(self.states, 1):
+            self._taylor = np.zeros((cvode.MAX_ORDER + 1, max(self.states, 1)))
         step, start = self.scenario.step, self.scenario.start
         while row < rows:
             self._evaluation_error = None
@@ -323,14 +325,22 @@ class ModelExchangeMaster(Master):
             reached = solver.t.value
             if flag < 0:
                 self._stop_failed(flag)
+            tn, order = 0.0, 0
+            if row < rows and start + row * step <= reached:  # the interpolant as a Taylor polynomial about tn
+                status, tn, order = solver.taylor(self._taylor)
+                if status < 0:
+                    self._stop_failed(status)
             while row < rows:
                 t = start + row * step
                 if not t <= reached:
                     break
-                status = solver.interpolate(t)
-                if status < 0:
-                    self._stop_failed(status)
-                self._record_row(plan, record, row, t, solver.interpolated)
+                dt = t - tn  # Horner, as harness/me_loop.c: x = ((c_q dt + c_q-1) dt + ...) dt + c_0
+                x = self._taylor[order].copy()
+                for k in range(order - 1, -1, -1):
+                    np.multiply(x, dt, out=x)
+                    np.add(x, self._taylor[k], out=x)
+                ctypes.memmove(self.x, x.ctypes.data, self._bytes)
+                self._record_row(plan, record, row, t, self.x)
                 row += 1
                 self.rows_done = row
                 if row % DIVERGENCE_CHECK_EVERY == 0:

@@ -628,7 +628,15 @@ USER_NOTES = """## What a user of another FMI tool must know
 - **Warnings** (switch the FMU's logging on: pythonfmu drops every message otherwise): "initial error
   re-latched" = the host did not propagate initial values, the result is still right; "u chatters with
   communication step" = the step is too large for the host's coupling, the result is wrong: use a smaller
-  step or a feedthrough-aware master. The matrix lists what each host passed on."""
+  step or a feedthrough-aware master. The matrix lists what each host passed on.
+- **The step in an SSP**: `export-ssp` writes it in every annotation we know an engine reads: ours,
+  libcosim's (`osp:FixedStepAlgorithm`, which libcosim takes) and OpenModelica's (`oms:FixedStepMaster`,
+  which OMSimulator's C API `oms_importFile` takes). OMSimulator's Python API, fmpy's SSP simulator and
+  Ecos read none: set the step by hand (`setFixedStepSize`, `step_size=`); docs/other_hosts.md has the table.
+- **Model Exchange** (the native FMUs): no communication step. Our master integrates them with CVODE
+  (`--algorithm me`; docs/model_exchange.md); OMSimulator runs an `export-ssp --algorithm me` package
+  strongly coupled (its CVODE; FMI 2.0 only), first order in its maximum step, which is also its output
+  interval (here the scenario's step). Their rows are on the scenario's step as output grid."""
 
 
 def steps_for_hosts(convergence: dict) -> list:
