@@ -31,7 +31,7 @@ import initial_error_latch as latch_rule
 from pythonfmu import DefaultExperiment
 # pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
 # so the project's base class is imported under that name.
-from afc_slave_base import INPUT, OUTPUT, PARAMETER, Variable, finite, non_negative, positive
+from afc_slave_base import INPUT, OUTPUT, PARAMETER, Tuning, Variable, finite, non_negative, positive
 from afc_slave_base import TableSlave as Fmi2Slave
 
 _INF = math.inf
@@ -42,28 +42,42 @@ THETA_INITIAL = ("theta0", "order", "sets")  # theta_j(0) = theta0 for j <= sets
 INITIAL_ERROR_FROM_INPUTS = 1
 INITIAL_ERROR_PINNED = 2
 
+# Search ranges of `python -m harness tune` (docs/tuning.md): wide enough to hold the paper's values
+# for the pendulum and the manipulator and the motor arm's, log-scaled where they span decades.
+# Declaration only: nothing of them reaches modelDescription.xml or the C tables.
+VUD_ONLY = (1,)  # alpha_i = 1 in variants 2 and 3: lambda_ce and kappa_i act in vud only
+FAE_ONLY = (3,)  # w_hat exists in variant 3 only
+K_RANGE = dict(low=0.05, high=50.0)  # k1, k2: > 0 is Hurwitz for n = 2
+HURWITZ_FRACTION = dict(low=0.01, high=0.99, scale="hurwitz")  # k3, k4: a fraction of the Routh bound
+Q_RANGE = dict(low=0.1, high=1000.0)
+KAPPA_RANGE = dict(low=0.1, high=1000.0, variants=VUD_ONLY)
+UNIVERSE_RANGE = dict(low=0.05, high=20.0)
+
 VARIABLES = (
     Variable("variant", PARAMETER, 1, kind="Integer", minimum=1, maximum=3,
              description="1 = vud (variable universes, proposed), 2 = fixed universes, "
                          "3 = fixed universes + approximation-error estimator"),
     Variable("fls_input", PARAMETER, 1, kind="Integer", minimum=1, maximum=2,
              description="FLS input: 1 = modified error [E, dE], 2 = state [ym - e, dym - de]"),
-    positive("k1", 2.0, description="Hurwitz gain k1 of s^2 + k1 s + k2"),
-    positive("k2", 1.0, description="Hurwitz gain k2 of s^2 + k1 s + k2"),
-    positive("q1", 10.0, description="Q = diag(q1, q2) of the Lyapunov equation (30)"),
-    positive("q2", 10.0, description="Q = diag(q1, q2) of the Lyapunov equation (30)"),
-    positive("gamma", 300.0, description="learning rate gamma of the adaptive law (31)"),
-    positive("gamma_w", 300.0, description="learning rate of w_hat (variant 3)"),
-    positive("m_theta", 200.0, description="projection bound M_theta (31)"),
-    positive("delta", 5.0, description="projection boundary layer delta (31)"),
-    non_negative("lambda_e", 5.0, "1/s", "decay rate of the modified error (Remark 3); 0 = off"),
+    positive("k1", 2.0, description="Hurwitz gain k1 of s^2 + k1 s + k2", tuning=Tuning(**K_RANGE)),
+    positive("k2", 1.0, description="Hurwitz gain k2 of s^2 + k1 s + k2", tuning=Tuning(**K_RANGE)),
+    positive("q1", 10.0, description="Q = diag(q1, q2) of the Lyapunov equation (30)", tuning=Tuning(**Q_RANGE)),
+    positive("q2", 10.0, description="Q = diag(q1, q2) of the Lyapunov equation (30)", tuning=Tuning(**Q_RANGE)),
+    positive("gamma", 300.0, description="learning rate gamma of the adaptive law (31)", tuning=Tuning(1.0, 1e4)),
+    positive("gamma_w", 300.0, description="learning rate of w_hat (variant 3)",
+             tuning=Tuning(1.0, 1e4, variants=FAE_ONLY)),
+    positive("m_theta", 200.0, description="projection bound M_theta (31)", tuning=Tuning(1.0, 1e4)),
+    positive("delta", 5.0, description="projection boundary layer delta (31)", tuning=Tuning(0.01, 100.0)),
+    non_negative("lambda_e", 5.0, "1/s", "decay rate of the modified error (Remark 3); 0 = off",
+                 tuning=Tuning(0.1, 100.0)),
     Variable("lambda_ce", PARAMETER, 0.99, description="contraction-expansion depth lambda (23)",
-             minimum=0.0, maximum=1.0, exclusive_minimum=True, exclusive_maximum=True),
-    positive("kappa1", 10.0, description="contraction-expansion width kappa_1 (23)"),
-    positive("kappa2", 10.0, description="contraction-expansion width kappa_2 (23)"),
-    positive("mf_slope", 7.0, description="slope s of the sigmoid membership functions"),
-    positive("E1", math.pi / 3, description="universe [-E1, E1] of FLS input 1"),
-    positive("E2", math.pi / 3, description="universe [-E2, E2] of FLS input 2"),
+             minimum=0.0, maximum=1.0, exclusive_minimum=True, exclusive_maximum=True,
+             tuning=Tuning(0.5, 0.9999, "log1m", variants=VUD_ONLY)),
+    positive("kappa1", 10.0, description="contraction-expansion width kappa_1 (23)", tuning=Tuning(**KAPPA_RANGE)),
+    positive("kappa2", 10.0, description="contraction-expansion width kappa_2 (23)", tuning=Tuning(**KAPPA_RANGE)),
+    positive("mf_slope", 7.0, description="slope s of the sigmoid membership functions", tuning=Tuning(0.5, 50.0)),
+    positive("E1", math.pi / 3, description="universe [-E1, E1] of FLS input 1", tuning=Tuning(**UNIVERSE_RANGE)),
+    positive("E2", math.pi / 3, description="universe [-E2, E2] of FLS input 2", tuning=Tuning(**UNIVERSE_RANGE)),
     finite("theta0", 0.0, description="initial value of every theta_j"),
     Variable("e", INPUT, 0.0, description="tracking error e = ym - y"),
     Variable("de", INPUT, 0.0, description="tracking error rate de = dym - dy"),
@@ -98,15 +112,23 @@ VARIABLES = (
     Variable("sets", PARAMETER, 2, kind="Integer", minimum=2, maximum=afc_math.SETS_MAX,
              description=f"fuzzy sets m per FLS input (sets^order <= {afc_math.RULES_MAX})"),
     positive("k3", 0.5, description="Hurwitz gain k3 of s^n + k1 s^(n-1) + ... + kn (n >= 3); "
-                                    "0.5 keeps s^3 + 2 s^2 + s + 0.5 Hurwitz with the default k1, k2"),
+                                    "0.5 keeps s^3 + 2 s^2 + s + 0.5 Hurwitz with the default k1, k2",
+             tuning=Tuning(**HURWITZ_FRACTION, order=3)),
     positive("k4", 0.1, description="Hurwitz gain k4 (n = 4); 0.1 keeps s^4 + 2 s^3 + s^2 + 0.5 s + 0.1 "
-                                    "Hurwitz with the default k1..k3"),
-    positive("q3", 10.0, description="Q = diag(q1, ..., qn) of (30) (n >= 3); 10 as q1, q2"),
-    positive("q4", 10.0, description="Q = diag(q1, ..., qn) of (30) (n = 4); 10 as q1, q2"),
-    positive("kappa3", 10.0, description="contraction-expansion width kappa_3 (23) (n >= 3); 10 as kappa1, 2"),
-    positive("kappa4", 10.0, description="contraction-expansion width kappa_4 (23) (n = 4); 10 as kappa1, 2"),
-    positive("E3", math.pi / 3, description="universe [-E3, E3] of FLS input 3 (n >= 3); as E1, E2"),
-    positive("E4", math.pi / 3, description="universe [-E4, E4] of FLS input 4 (n = 4); as E1, E2"),
+                                    "Hurwitz with the default k1..k3",
+             tuning=Tuning(**HURWITZ_FRACTION, order=4)),
+    positive("q3", 10.0, description="Q = diag(q1, ..., qn) of (30) (n >= 3); 10 as q1, q2",
+             tuning=Tuning(**Q_RANGE, order=3)),
+    positive("q4", 10.0, description="Q = diag(q1, ..., qn) of (30) (n = 4); 10 as q1, q2",
+             tuning=Tuning(**Q_RANGE, order=4)),
+    positive("kappa3", 10.0, description="contraction-expansion width kappa_3 (23) (n >= 3); 10 as kappa1, 2",
+             tuning=Tuning(**KAPPA_RANGE, order=3)),
+    positive("kappa4", 10.0, description="contraction-expansion width kappa_4 (23) (n = 4); 10 as kappa1, 2",
+             tuning=Tuning(**KAPPA_RANGE, order=4)),
+    positive("E3", math.pi / 3, description="universe [-E3, E3] of FLS input 3 (n >= 3); as E1, E2",
+             tuning=Tuning(**UNIVERSE_RANGE, order=3)),
+    positive("E4", math.pi / 3, description="universe [-E4, E4] of FLS input 4 (n = 4); as E1, E2",
+             tuning=Tuning(**UNIVERSE_RANGE, order=4)),
     Variable("d2e", INPUT, 0.0, description="tracking error acceleration d2e = d2ym - d2y (n >= 3)"),
     Variable("d3e", INPUT, 0.0, description="third derivative of the tracking error d3e (n = 4)"),
     Variable("d2ym", INPUT, 0.0, description="reference acceleration d2ym (fls_input = 2, n >= 3)"),

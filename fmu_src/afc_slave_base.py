@@ -62,6 +62,53 @@ INPUT = "input"
 OUTPUT = "output"
 
 
+TUNING_SCALES = ("linear", "log", "log1m", "hurwitz")
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """Where ``python -m harness tune`` searches a parameter (docs/tuning.md): declaration only.
+
+    Nothing of it reaches modelDescription.xml or the native edition's C tables (FMI has no
+    attribute for a search range); it lives in the table so that the valid range and the search
+    range are declared side by side, once.  ``scale``:
+
+    * ``linear``: uniform over [low, high];
+    * ``log``: uniform in log(value) (ranges spanning a decade or more);
+    * ``log1m``: uniform in log(1 - value) over [1 - high, 1 - low] (a parameter in (0, 1)
+      whose effect is set by its distance to 1, as lambda_ce: alpha(0) = 1 - lambda_ce (23));
+    * ``hurwitz``: the value is a fraction f of the largest value keeping the polynomial
+      s^n + k1 s^(n-1) + ... + kn Hurwitz given k1..k(i-1) (the Routh conditions), f searched
+      on a log scale over [low, high] inside (0, 1): every sample is Hurwitz (P of (30) positive
+      definite) and every Hurwitz k with the earlier gains in range can be reached.
+
+    ``variants``: the values of the FMU's ``variant`` parameter in which the parameter acts
+    (empty: every variant); ``order``: the smallest value of the FMU's ``order`` parameter at
+    which it acts.
+    """
+
+    low: float
+    high: float
+    scale: str = "log"
+    variants: tuple[int, ...] = ()
+    order: int = 1
+
+    def problem(self) -> str | None:
+        """None for a usable range, else what is wrong with it."""
+        if self.scale not in TUNING_SCALES:
+            return f"scale {self.scale!r} is unknown; valid: {', '.join(TUNING_SCALES)}"
+        if not (math.isfinite(self.low) and math.isfinite(self.high)):
+            return f"range [{self.low!r}, {self.high!r}] is not finite"
+        if not self.low < self.high:
+            return (f"range [{self.low:g}, {self.high:g}] is "
+                    + ("empty" if self.low == self.high else "inverted") + "; give low < high")
+        if self.scale in ("log", "hurwitz") and not self.low > 0:
+            return f"a {self.scale} range needs low > 0 (low = {self.low:g})"
+        if self.scale in ("log1m", "hurwitz") and not self.high < 1:
+            return f"a {self.scale} range needs high < 1 (high = {self.high:g})"
+        return None
+
+
 @dataclass(frozen=True)
 class Variable:
     """One row of an FMU's variable table."""
@@ -83,6 +130,7 @@ class Variable:
     # outputs: what the output's value in initialization mode depends on (parameters and inputs:
     # the knowns of FMI's InitialUnknowns); None: every parameter and depends_on (conservative)
     initial_depends_on: tuple[str, ...] | None = None
+    tuning: Tuning | None = None  # parameters: where `harness tune` searches it (None: not tuned)
 
     def valid_range(self) -> str:
         """The valid range as text, e.g. ``(0, 1)``, ``> 0``, ``{1, 2, 3}``."""
@@ -112,19 +160,19 @@ class Variable:
         return None
 
 
-def positive(name, start, unit="", description=""):
+def positive(name, start, unit="", description="", tuning=None):
     """A Real parameter that must be > 0."""
-    return Variable(name, PARAMETER, start, unit, description, minimum=0.0, exclusive_minimum=True)
+    return Variable(name, PARAMETER, start, unit, description, minimum=0.0, exclusive_minimum=True, tuning=tuning)
 
 
-def non_negative(name, start, unit="", description=""):
+def non_negative(name, start, unit="", description="", tuning=None):
     """A Real parameter that must be >= 0."""
-    return Variable(name, PARAMETER, start, unit, description, minimum=0.0)
+    return Variable(name, PARAMETER, start, unit, description, minimum=0.0, tuning=tuning)
 
 
-def finite(name, start, unit="", description=""):
+def finite(name, start, unit="", description="", tuning=None):
     """A Real parameter that may take any finite value."""
-    return Variable(name, PARAMETER, start, unit, description)
+    return Variable(name, PARAMETER, start, unit, description, tuning=tuning)
 
 
 def initial_dependencies(variables, variable: Variable) -> tuple:

@@ -20,9 +20,11 @@ import functools
 import multiprocessing
 import os
 import sys
+import threading
 import time as clock
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -64,7 +66,11 @@ class Case:
 
     @property
     def scenario_name(self) -> str:
-        return self.scenario.name if isinstance(self.scenario, scenarios.Scenario) else str(self.scenario)
+        """The scenario's name; for a .toml path, the file's stem (regress names reference files after it)."""
+        if isinstance(self.scenario, scenarios.Scenario):
+            return self.scenario.name
+        text = str(self.scenario)
+        return Path(text).stem if text.endswith(".toml") else text
 
     @property
     def name(self) -> str:
@@ -179,29 +185,121 @@ def default_jobs() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+#: without a terminal (CI logs, ``| tee``, ``| cat``): nothing for a command shorter than this, then at
+#: most one line per finished item this often ...
+PROGRESS_LINE_EVERY_S = 5.0
+#: ... and one this often while nothing finishes, so a long run never looks hung
+PROGRESS_HEARTBEAT_S = 30.0
+
+
+class Progress:
+    """How a long command says how far it is, on stderr: tqdm's bar on a terminal; elsewhere, where no
+    bar can be drawn, plain lines: none for a command done within PROGRESS_LINE_EVERY_S (a short
+    run stays quiet, its error alone on stderr), then one per finished item at most every
+    PROGRESS_LINE_EVERY_S, one every PROGRESS_HEARTBEAT_S while nothing finishes, and one at the end.
+    ``enabled=False``: silent.  ``bar``: force the bar (True) or the lines (False)."""
+
+    def __init__(self, total: int, description: str, unit: str = "run", enabled: bool = True, initial: int = 0,
+                 stream=None, bar: bool | None = None, **tqdm_options):
+        self.stream = stream or sys.stderr
+        self.total, self.description, self.unit = total, description, unit
+        self.done, self.label, self.printed = initial, "", False
+        self.started = self.last_line = clock.perf_counter()
+        terminal = self.stream.isatty() if bar is None else bar
+        self.mode = "off" if not enabled else "bar" if terminal else "lines"
+        self._lock = threading.Lock()
+        self._stopped = threading.Event()
+        self._bar = self._heartbeat = None
+        if self.mode == "bar":
+            from tqdm import tqdm  # here, not at module level: 0.1-0.3 s of import a CLI start without a study skips
+
+            self._bar = tqdm(total=total, initial=initial, desc=description, unit=unit, file=self.stream,
+                             **tqdm_options)
+        elif self.mode == "lines":
+            self._heartbeat = threading.Thread(target=self._beat, daemon=True)
+            self._heartbeat.start()
+
+    def update(self, count: int = 1, label: str = "") -> None:
+        """``count`` more items finished (the last one: ``label``)."""
+        with self._lock:
+            self.done += count
+            self.label = label or self.label
+        if self._bar is not None:
+            self._bar.update(count)
+        elif self.mode == "lines" and self.done < self.total and \
+                clock.perf_counter() - self.last_line >= PROGRESS_LINE_EVERY_S:
+            self._line(self._status())
+
+    def set_postfix(self, **values) -> None:
+        if self._bar is not None:
+            self._bar.set_postfix(**values)
+        else:
+            self.label = ", ".join(f"{key} {value}" for key, value in values.items())
+
+    def close(self) -> None:
+        """Stop (and say where it ended, if it said anything); closing twice is harmless."""
+        if self._bar is not None:
+            self._bar.close()
+        elif self.mode == "lines" and not self._stopped.is_set():
+            self._stopped.set()
+            self._heartbeat.join()
+            if self.printed:
+                self._line(self._status(final=True))
+        self._stopped.set()
+
+    def _status(self, final: bool = False) -> str:
+        elapsed = clock.perf_counter() - self.started
+        text = f"{self.done}/{self.total} {self.unit}s done in {elapsed:.0f} s"
+        if not final and 0 < self.done < self.total:
+            text += f", about {elapsed / self.done * (self.total - self.done):.0f} s left"
+        return text + (f" (last: {self.label})" if self.label and not final else "")
+
+    def _beat(self):
+        while not self._stopped.wait(min(PROGRESS_HEARTBEAT_S, 1.0)):
+            if clock.perf_counter() - self.last_line >= PROGRESS_HEARTBEAT_S:
+                try:
+                    self._line(self._status() + ", still running")
+                except (ValueError, OSError):  # the stream was closed under us: nothing more to say
+                    return
+
+    def _line(self, text: str):
+        with self._lock:
+            print(f"{self.description}: {text}", file=self.stream, flush=True)
+            self.last_line, self.printed = clock.perf_counter(), True
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
 def parallel_map(function, items: list, jobs: int | None = None, description: str = "",
-                 progress: bool | None = False) -> list:
+                 progress: bool | None = False, label=None) -> list:
     """[function(item) for item in items] on ``jobs`` processes (default every core), in order.
 
     Workers are spawned, clean interpreters: loaded FMUs (and Ecos's threads) never cross a
     fork.  ``function`` must be picklable (a module-level function or a functools.partial).
+    ``progress`` (None or True: on; False: off) is a :class:`Progress` on stderr: a bar on a
+    terminal, lines elsewhere; ``label(item)`` names a finished item in those lines.
     """
-    from tqdm import tqdm  # here, not at module level: 0.1-0.3 s of import that a CLI start without a study skips
-
     jobs = max(1, min(len(items), jobs or default_jobs()))
-    show = sys.stderr.isatty() if progress is None else progress
     results = [None] * len(items)
-    with tqdm(total=len(items), desc=description, unit="run", disable=not show, file=sys.stderr) as bar:
+    name = label or (lambda item: "")
+    with Progress(len(items), description or "runs", enabled=progress is not False) as bar:
         if jobs == 1:
             for index, item in enumerate(items):
                 results[index] = function(item)
-                bar.update()
+                bar.update(label=name(item))
             return results
         with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = {pool.submit(function, item): index for index, item in enumerate(items)}
-            for future in as_completed(futures):
-                results[futures[future]] = future.result()
-                bar.update()
+            pending = set(futures)
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    results[futures[future]] = future.result()
+                    bar.update(label=name(items[futures[future]]))
     return results
 
 
@@ -215,7 +313,9 @@ def run_cases(cases: list, jobs: int | None = None, description: str = "co-simul
     master_loop.library()  # the compiled loop too (when zig is installed), so no two workers compile it
     if any(case.algorithm == me_master.ALGORITHM for case in cases):
         me_loop.library()
-    return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths), cases, jobs, description, progress)
+    return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths), cases, jobs, description, progress,
+                        label=lambda case: case.label)
 
 
-__all__ = ["Case", "run_case", "run_cases", "simulate_any", "ALGORITHMS", "parallel_map", "default_jobs", "status_of", "one_line", "resample"]
+__all__ = ["Case", "Progress", "run_case", "run_cases", "simulate_any", "ALGORITHMS", "parallel_map", "default_jobs",
+           "status_of", "one_line", "resample"]

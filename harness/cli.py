@@ -16,24 +16,24 @@ from c_toolchain import NativeBuildError
 
 from . import cli_args, variants
 from . import scenario as scenarios
+from .cases import Progress
 from .hosts import bench, engines, matrix, ssp
 from .cases import ALGORITHMS, simulate_any
 from .master import SimulationFailed
 from .me_master import ALGORITHM as MODEL_EXCHANGE
 from .me_master import DEFAULT_RTOL
-from .scores import SCORE_KEYS, score_run
-from .studies import me_accuracy, mutation, regression, step_study, sweep, tables, work_precision
+from .scores import SCORE_KEYS, score_run, value_text, why_none
+from .studies import compat, me_accuracy, mutation, regression, step_study, sweep, tables, tune, work_precision
 
 
-def _progress_bar(total: int, description: str, enabled: bool):
+def _progress(total: int, description: str, enabled: bool):
+    """(callback for the master, close): a bar on a terminal, lines on stderr elsewhere (cases.Progress)."""
     if not enabled:
         return None, lambda: None
-    from tqdm import tqdm  # here, not at module level: 0.1-0.3 s of import that --help and --json runs skip
-
-    bar = tqdm(total=total, desc=description, unit="step", unit_scale=True, leave=False, file=sys.stderr)
+    bar = Progress(total, description, unit="step", unit_scale=True, leave=False)
 
     def update(done, _total):
-        bar.update(done - bar.n)
+        bar.update(done - bar.done)
 
     return update, bar.close
 
@@ -45,8 +45,7 @@ def run_command(args) -> int:
                                   "has a communication step (--step)")
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
     cli_args.check_output_interval(args.output_interval, scenario.step)
-    progress, close = _progress_bar(scenario.steps, f"{scenario.name}/{args.controller}",
-                                    enabled=not args.json and sys.stderr.isatty())
+    progress, close = _progress(scenario.steps, f"{scenario.name}/{args.controller}", enabled=not args.json)
     for note in scenario.notes:  # e.g. the stop moved to a whole number of steps
         print(f"note: {note}", file=sys.stderr)
     try:
@@ -59,7 +58,8 @@ def run_command(args) -> int:
             failure.result.write_csv(args.out, args.output_interval)
             print(f"partial result ({failure.result.rows} rows) written to {args.out}")
         return cli_args.report(failure)
-    close()
+    finally:
+        close()  # also when the scenario is refused before the first step
     if not me and scenario.path is not None and scenario.path.parent == scenarios.SCENARIO_DIR:  # one the study covers
         # after the run: a failed run says one line, its error
         warning = step_study.step_warning(scenario.name, args.controller, args.algorithm, scenario.step)
@@ -74,9 +74,11 @@ def run_command(args) -> int:
         summary.pop("us_per_step")
         summary.update(algorithm=MODEL_EXCHANGE, output_interval=summary.pop("step"),
                        **{key: value for key, value in result.solver.items() if key != "loop"})
+    undefined = {key: why_none(key, scenario.start, scenario.stop) for key in SCORE_KEYS if scores[key] is None}
     if args.json:
-        if cli_args.short_horizon_note(scenario):
-            summary["warnings"] = [f"es1_pct, es2_pct{cli_args.short_horizon_note(scenario)}"]
+        if undefined:  # each null score with its reason
+            summary["warnings"] = [f"{key} {value_text(key, None, scenario.start, scenario.stop)}: {reason}"
+                                   for key, reason in undefined.items()]
         print(json.dumps(summary))
     else:
         if me:
@@ -89,10 +91,11 @@ def run_command(args) -> int:
         else:
             print(f"{scenario.name} / {args.controller} ({args.algorithm}), step {scenario.step:g} s, "
                   f"{result.rows - 1} steps in {result.wall_s:.2f} s ({result.us_per_step:.1f} us/step)")
-        short = cli_args.short_horizon_note(scenario)
         for key in SCORE_KEYS:
-            note = short if key in cli_args.PERIOD_SCORES and short else ""
-            print(f"  {key:8s} {'n/a' if note else format(scores[key], '.6g')}{note}")
+            text = value_text(key, scores[key], scenario.start, scenario.stop)
+            if key in undefined:
+                text += f" ({undefined[key]})"
+            print(f"  {key:8s} {text}")
         if args.out:
             print(f"  result   {args.out}")
     return 0
@@ -122,8 +125,9 @@ def register_run(commands):
 
 #: every subcommand, in the order of ``--help``: each lives in its own module with a ``register(commands)``
 SUBCOMMAND_REGISTRATIONS = (register_run, tables.register, step_study.register, me_accuracy.register,
-                            work_precision.register, sweep.register,
-                            regression.register, ssp.register, engines.register, bench.register, mutation.register, matrix.register)
+                            work_precision.register, sweep.register, regression.register, ssp.register,
+                            engines.register, bench.register, mutation.register, matrix.register, tune.register,
+                            compat.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -11,6 +11,7 @@ The types are plain functions for ``add_argument(type=...)``: argparse reports t
 from __future__ import annotations
 
 import argparse
+import difflib
 import math
 import re
 import shutil
@@ -20,8 +21,8 @@ import zipfile
 from pathlib import Path
 
 from . import scenario as scenarios
-from .fmi import FmiError, ModelInfo
-from .master import SimulationFailed, resolve_fmu, simulate
+from .fmi import FmiError, FmuFileError
+from .master import SimulationFailed, model_info, simulate
 from .scenario import ScenarioError
 
 USAGE_EXIT = 2  # a mistake in the command line or in a scenario file
@@ -32,12 +33,80 @@ class UsageError(ValueError):
     """A mistake on the command line that argparse's types cannot see alone (exit status 2)."""
 
 
+#: what a command line means by a negative number, also in scientific notation (argparse alone reads
+#: "-1e-4" as an option and says "expected one argument"): a value, which the option's type then refuses
+NEGATIVE_NUMBER = re.compile(r"^-(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?$|^-(?:inf|infinity|nan)$", re.IGNORECASE)
+
+
+def close_match(word: str, choices) -> str | None:
+    """The choice closest to a misspelt ``word`` (difflib's ratio >= 0.6), or None."""
+    found = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return found[0] if found else None
+
+
+def _unknown_option(arguments, known) -> str | None:
+    """The first of ``arguments`` that looks like a long option and is none of ``known`` (nor an
+    abbreviation of one), without its ``=value``."""
+    for argument in arguments:
+        if argument == "--":
+            return None
+        option = argument.split("=", 1)[0]
+        if option.startswith("--") and len(option) > 2 and not any(o.startswith(option) for o in known):
+            return option
+    return None
+
+
 class OneLineParser(argparse.ArgumentParser):
-    """argparse with one line per usage error (no usage block), exit status 2."""
+    """argparse with one line per usage error (no usage block), exit status 2; a negative number in
+    any notation is a value; a misspelt option or choice gets its close match ("did you mean
+    --controller?": Python's argparse before 3.14 suggests nothing)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER  # read by argparse's option parsing (3.10-3.13)
 
     def error(self, message):
+        """Exit 2 with one line; a misspelt option is named first (it is why a required option or
+        argument seems missing)."""
+        leaf = not any(isinstance(action, argparse._SubParsersAction) for action in self._actions)
+        unknown = _unknown_option(getattr(self, "_arguments", ()), self._long_options()) if leaf else None
+        if unknown is not None and not message.startswith("unrecognized option"):
+            message = self._unrecognized(unknown, self._long_options())
         hint = f" (see {self.prog} --help)"
         self.exit(USAGE_EXIT, f"{self.prog}: error: {message}{hint}\n")
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._arguments = list(sys.argv[1:] if args is None else args)
+        namespace, extras = super().parse_known_args(args, namespace)
+        known = self._long_options(namespace)
+        unknown = _unknown_option(extras, known)
+        if unknown is not None:
+            self.error(self._unrecognized(unknown, known))
+        return namespace, extras
+
+    @staticmethod
+    def _unrecognized(option: str, known: list) -> str:
+        match = close_match(option, known)
+        hint = f"; did you mean {match}?" if match else f"; valid: {', '.join(known)}"
+        return f"unrecognized option {option}{hint}"
+
+    def _long_options(self, namespace=None) -> list:
+        """The long options of this parser and of the subcommand chosen (argparse hands a
+        subcommand's unknown options up to its parent in some versions)."""
+        options = [o for o in self._option_string_actions if o.startswith("--")]
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction) and namespace is not None:
+                chosen = action.choices.get(getattr(namespace, action.dest, None) or "")
+                if chosen is not None:
+                    options += [o for o in chosen._option_string_actions if o.startswith("--")]
+        return sorted(set(options) - {"--help"}) + ["--help"]
+
+    def _check_value(self, action, value):
+        if action.choices is not None and value not in action.choices:
+            match = close_match(str(value), [str(c) for c in action.choices])
+            hint = f"; did you mean {match!r}?" if match else ""
+            raise argparse.ArgumentError(action, f"invalid choice: {value!r}{hint} (choose from "
+                                                 f"{', '.join(map(repr, action.choices))})")
 
 
 # ------------------------------------------------------------------ numbers
@@ -155,8 +224,7 @@ def check_assignments(configured, assignments, fmu_paths: dict | None = None, op
             raise UsageError(f"{option} {dotted}={value:g}: unknown instance {instance!r}; "
                              f"valid: {', '.join(configured.components)}")
         if instance not in infos:
-            spec = configured.components[instance]
-            infos[instance] = ModelInfo.read(resolve_fmu(spec.fmu, configured, fmu_paths))
+            infos[instance] = model_info(configured, instance, fmu_paths)
         variables = infos[instance].variables
         parameters = [name for name, v in variables.items() if v.causality == "parameter"]
         found = variables.get(parameter)
@@ -214,16 +282,6 @@ def refuse_tracked(paths, option: str = "--out"):
 
 
 # ------------------------------------------------- consistency and warnings
-PERIOD_SCORES = ("es1_pct", "es2_pct")  # taken over the last reference period [T - 2 pi, T]
-
-
-def short_horizon_note(configured) -> str:
-    """A word for es1/es2 when the run is shorter than the reference period they are taken over."""
-    if configured.stop - configured.start < 2 * math.pi - 1e-9:
-        return " (stop < 2 pi: the last reference period they are taken over is not there)"
-    return ""
-
-
 def check_output_interval(interval, step: float):
     """An output interval must be a whole multiple of the communication step."""
     if interval is None:
@@ -278,7 +336,7 @@ def one_line(error: BaseException) -> str:
 
 def exit_status(error: BaseException) -> int:
     """2 for a usage mistake (also a parameter the FMU rejects when initialisation ends), else 1."""
-    if isinstance(error, (UsageError, ScenarioError)):
+    if isinstance(error, (UsageError, ScenarioError, FmuFileError)):
         return USAGE_EXIT
     fmi = _fmi_error(error)
     if fmi is not None and fmi.function == "fmi2ExitInitializationMode" and \

@@ -15,6 +15,7 @@ import ctypes
 import functools
 import shutil
 import tempfile
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -52,6 +53,37 @@ class FmiError(RuntimeError):
         super().__init__(text)
 
 
+class FmuFileError(ValueError):
+    """A file given as an FMU is not one: empty, not a zip archive, no modelDescription.xml in it,
+    or a model description that cannot be read.  The message names the file and what it is."""
+
+
+FMU_IS = "an FMU is a zip archive holding modelDescription.xml"
+
+
+def check_fmu_file(path: Path) -> None:
+    """Raise FmuFileError, naming ``path``, unless it is a zip archive holding modelDescription.xml."""
+    if path.is_dir():
+        raise FmuFileError(f"{path} is a folder, not an FMU file ({FMU_IS})")
+    size = path.stat().st_size
+    if size == 0:
+        raise FmuFileError(f"{path} is empty (0 bytes), not an FMU ({FMU_IS})")
+    if not zipfile.is_zipfile(path):
+        with open(path, "rb") as stream:
+            head = stream.read(4)
+        what = "a truncated or damaged zip archive" if head.startswith(b"PK") else "not a zip archive"
+        raise FmuFileError(f"{path} is not an FMU: {what} ({size} bytes; {FMU_IS})")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = archive.namelist()
+    except (zipfile.BadZipFile, OSError) as error:
+        raise FmuFileError(f"{path} is not an FMU: a damaged zip archive ({error})") from None
+    if "modelDescription.xml" not in names:
+        held = ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
+        raise FmuFileError(f"{path} is not an FMU: no modelDescription.xml in the zip archive "
+                           f"(it holds {held or 'nothing'})")
+
+
 @dataclass
 class ModelInfo:
     """What the master needs of a modelDescription.xml."""
@@ -76,10 +108,16 @@ class ModelInfo:
             raise FileNotFoundError(f"FMU file not found: {path}")
         if interface not in INTERFACES:
             raise ValueError(f"interface {interface!r}; valid: {', '.join(INTERFACES)}")
-        md = read_model_description(str(path))
+        check_fmu_file(path)
+        try:
+            md = read_model_description(str(path))
+        except Exception as error:  # noqa: BLE001 - fmpy raises what lxml or its own checks raise
+            text = " | ".join(line.strip() for line in str(error).splitlines() if line.strip()) or type(error).__name__
+            raise FmuFileError(f"{path}: its modelDescription.xml cannot be read: {text}") from None
         declared = md.coSimulation if interface == CO_SIMULATION else md.modelExchange
         if declared is None:
-            raise ValueError(f"{path.name} has no {interface} interface")
+            element = "CoSimulation" if interface == CO_SIMULATION else "ModelExchange"
+            raise FmuFileError(f"{path} is not a {interface} FMU (its modelDescription.xml declares no <{element}>)")
         if md.fmiVersion.startswith("3"):
             for v in md.modelVariables:  # the FMI 2.0 type names the harness checks
                 v.type = FMI3_TYPE_NAMES.get(v.type, v.type)
@@ -125,17 +163,24 @@ class Component:
     def fmi3(self) -> bool:
         return self.info.fmi_version.startswith("3")
 
-    def instantiate(self, logging_on: bool = False):
-        """Extract and instantiate; on failure the extraction is removed before the error propagates."""
-        self.unzip_dir = tempfile.mkdtemp(prefix=f"afc_{self.name}_")
+    def instantiate(self, logging_on: bool = False, extracted: str | None = None):
+        """Extract and instantiate; on failure the extraction is removed before the error propagates.
+
+        ``extracted``: a folder the FMU is already extracted to, kept by the caller (a study that runs the
+        same FMUs thousands of times extracts them once); it is neither written nor removed here.
+        """
+        self._owns_dir = extracted is None
+        self.unzip_dir = tempfile.mkdtemp(prefix=f"afc_{self.name}_") if extracted is None else str(extracted)
         try:
-            extract(str(self.info.path), self.unzip_dir)
+            if self._owns_dir:
+                extract(str(self.info.path), self.unzip_dir)
             if self.fmi3:
                 self._instantiate3(logging_on)
             else:
                 self._instantiate2(logging_on)
         except BaseException:
-            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            if self._owns_dir:
+                shutil.rmtree(self.unzip_dir, ignore_errors=True)
             raise
         return self
 
@@ -224,7 +269,8 @@ class Component:
         try:
             self.slave.freeInstance()
         finally:
-            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            if getattr(self, "_owns_dir", True):
+                shutil.rmtree(self.unzip_dir, ignore_errors=True)
 
     # -------------------------------------------------------------- per step
     def real_buffer(self, names) -> tuple:
@@ -410,5 +456,5 @@ class ModelExchangeComponent(Component):
         raise TypeError(f"{self.name} is a Model Exchange instance: it has no doStep")
 
 
-__all__ = ["BoundArrayCall", "Component", "ContinuousBlock", "FmiError", "ModelExchangeComponent", "ModelInfo",
-           "CO_SIMULATION", "MODEL_EXCHANGE"]
+__all__ = ["BoundArrayCall", "Component", "ContinuousBlock", "FmiError", "FmuFileError", "ModelExchangeComponent",
+           "ModelInfo", "check_fmu_file", "CO_SIMULATION", "MODEL_EXCHANGE"]

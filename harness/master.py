@@ -29,8 +29,8 @@ import numpy as np
 import build_fmu
 
 from . import master_loop
-from .fmi import BoundArrayCall, Component, FmiError, ModelInfo
-from .scenario import Scenario, ScenarioError
+from .fmi import BoundArrayCall, Component, FmiError, FmuFileError, ModelInfo
+from .scenario import Scenario, ScenarioError, did_you_mean
 
 ALGORITHMS = ("feedthrough", "jacobi")
 FMI_WARNING = 1
@@ -110,27 +110,44 @@ def resolve_fmu(spec_fmu: str, scenario: Scenario, built: dict | None) -> Path:
     return built[spec_fmu]
 
 
-def _names(info: ModelInfo, causality: str) -> str:
-    return ", ".join(v.name for v in info.variables.values() if v.causality == causality)
+def _names(info: ModelInfo, causality: str) -> list:
+    return [v.name for v in info.variables.values() if v.causality == causality]
 
 
 def _article(word: str) -> str:
     return "an" if word[:1] in "aeiou" else "a"
 
 
+def _where(scenario: Scenario) -> str:
+    """How messages name the scenario: its file, else its name."""
+    return str(scenario.path) if scenario.path is not None else scenario.name
+
+
+def model_info(scenario: Scenario, instance: str, fmu_paths: dict | None) -> ModelInfo:
+    """The model description of one component; a missing or broken FMU file is a ScenarioError
+    naming the file, the component and its ``fmu`` key."""
+    spec = scenario.components[instance]
+    try:
+        return ModelInfo.read(resolve_fmu(spec.fmu, scenario, fmu_paths))
+    except (ScenarioError, FmuFileError, FileNotFoundError) as error:
+        raise ScenarioError(f"{_where(scenario)}: [components.{instance}] fmu = {spec.fmu!r}: {error}") from None
+
+
 def _check_variable(dotted: str, infos: dict, causality: str, role: str):
     instance, _, variable = dotted.partition(".")
     if instance not in infos:
-        raise ScenarioError(f"{role} {dotted!r}: unknown instance {instance!r}; valid: {', '.join(infos)}")
+        raise ScenarioError(f"{role} {dotted!r}: unknown instance {instance!r}{did_you_mean(instance, infos)}; "
+                            f"valid: {', '.join(infos)}")
     info = infos[instance]
     found = info.variables.get(variable)
+    wanted = _names(info, causality)
     if found is None:
-        raise ScenarioError(f"{role} {dotted!r}: {instance} has no variable {variable!r}; "
-                            f"valid {causality}s: {_names(info, causality)}")
+        raise ScenarioError(f"{role} {dotted!r}: {instance} has no variable {variable!r}"
+                            f"{did_you_mean(variable, wanted)}; valid {causality}s: {', '.join(wanted)}")
     if found.causality != causality:
         raise ScenarioError(f"{role} {dotted!r} is {_article(found.causality)} {found.causality}, "
                             f"not {_article(causality)} {causality}; "
-                            f"valid {causality}s of {instance}: {_names(info, causality)}")
+                            f"valid {causality}s of {instance}: {', '.join(wanted)}")
     if found.type != "Real":
         raise ScenarioError(f"{role} {dotted!r} is of type {found.type}; connections and records are Real")
 
@@ -141,7 +158,7 @@ def _check_parameter_value(instance: str, parameter: str, value, kind: str):
     Range checks stay with the FMU, which names the valid range; this only stops values
     that float()/int() would silently convert ("0.99") or truncate (1.5 -> 1).
     """
-    where = f"components.{instance}: parameter {parameter} = {value!r}"
+    where = f"[components.{instance}.parameters] {parameter} = {value!r}"
     if kind == "Boolean":
         if not isinstance(value, bool):
             raise ScenarioError(f"{where} is not a Boolean (true or false)")
@@ -153,32 +170,43 @@ def _check_parameter_value(instance: str, parameter: str, value, kind: str):
 
 
 def validate(scenario: Scenario, infos: dict):
-    """Check every name of the scenario against the model descriptions."""
+    """Check every name of the scenario against the model descriptions; a mistake is one
+    ScenarioError naming the file, the table and the key (and the close match of a misspelt name)."""
+    try:
+        _validate(scenario, infos)
+    except ScenarioError as error:
+        raise ScenarioError(f"{_where(scenario)}: {error}") from None
+
+
+def _validate(scenario: Scenario, infos: dict):
     for name, spec in scenario.components.items():
         info = infos[name]
         for parameter in spec.parameters:
             found = info.variables.get(parameter)
             if found is None or found.causality != "parameter":
-                raise ScenarioError(f"components.{name}: {info.model_identifier} has no parameter {parameter!r}; "
-                                    f"valid: {_names(info, 'parameter')}")
+                valid = _names(info, "parameter")
+                raise ScenarioError(f"[components.{name}.parameters] {info.model_identifier} has no parameter "
+                                    f"{parameter!r}"
+                                    f"{did_you_mean(parameter, valid)}; valid: {', '.join(valid)}")
             _check_parameter_value(name, parameter, spec.parameters[parameter], found.type)
     targets = set()
-    for connection in scenario.connections:
-        _check_variable(connection.source, infos, "output", "connection from")
-        _check_variable(connection.target, infos, "input", "connection to")
+    for index, connection in enumerate(scenario.connections):
+        _check_variable(connection.source, infos, "output", f"[[connections]] {index + 1}: from =")
+        _check_variable(connection.target, infos, "input", f"[[connections]] {index + 1}: to =")
         if connection.target in targets:
-            raise ScenarioError(f"input {connection.target!r} is connected twice")
+            raise ScenarioError(f"[[connections]] {index + 1}: input {connection.target!r} is connected twice")
         targets.add(connection.target)
     for dotted in scenario.record:
-        _check_variable(dotted, infos, "output", "record")
+        _check_variable(dotted, infos, "output", "[record] variables:")
     connected = {c.source for c in scenario.connections}
     for dotted in scenario.bounds:
-        _check_variable(dotted, infos, "output", "bounds")
+        _check_variable(dotted, infos, "output", "[bounds]")
         if dotted not in connected and dotted not in scenario.record:
-            raise ScenarioError(f"bounds: {dotted!r} is neither connected nor recorded, so it is never read")
+            raise ScenarioError(f"[bounds] {dotted!r} is neither connected nor recorded, so it is never read")
     for role, dotted in scenario.signals.items():
         if dotted not in scenario.record:
-            raise ScenarioError(f"signal {role} = {dotted!r} is not in record.variables")
+            raise ScenarioError(f"[signals] {role} = {dotted!r} is not in [record] variables"
+                                f"{did_you_mean(dotted, scenario.record)}; add it there")
 
 
 @dataclass
@@ -241,12 +269,19 @@ class Master:
     """Instantiate, initialise and step the FMUs of one scenario."""
 
     def __init__(self, scenario: Scenario, algorithm: str = "feedthrough", fmu_paths: dict | None = None,
-                 logging_on: bool = True, loop: str = "auto"):
+                 logging_on: bool = True, loop: str = "auto", prepared: dict | None = None):
+        """``prepared``: {FMU path: (ModelInfo, folder it is extracted to)} kept by the caller for FMUs
+        it runs many times (harness/studies/tune.py); other FMUs are read and extracted per run."""
         if algorithm not in ALGORITHMS:
             raise ScenarioError(f"unknown algorithm {algorithm!r}; valid: {', '.join(ALGORITHMS)}")
         self.scenario, self.algorithm = scenario, algorithm
-        self.infos = {name: ModelInfo.read(resolve_fmu(spec.fmu, scenario, fmu_paths))
-                      for name, spec in scenario.components.items()}
+        self.infos, self.extracted = {}, {}
+        for name, spec in scenario.components.items():
+            path = resolve_fmu(spec.fmu, scenario, fmu_paths) if prepared else None
+            if prepared and path in prepared:
+                self.infos[name], self.extracted[name] = prepared[path]
+            else:
+                self.infos[name] = model_info(scenario, name, fmu_paths)  # names a bad FMU file in one line
         validate(scenario, self.infos)
         self.logging_on = logging_on
         self.loop = master_loop.choice(loop)  # "auto": the compiled loop if it can be built (master_loop.py)
@@ -338,7 +373,8 @@ class Master:
         self.rows_done = 0
         try:
             for name, spec in scenario.components.items():
-                component = Component(name, self.infos[name]).instantiate(logging_on=self.logging_on)
+                component = Component(name, self.infos[name]).instantiate(logging_on=self.logging_on,
+                                                                          extracted=self.extracted.get(name))
                 self.components[name] = component
             for name, spec in scenario.components.items():
                 component = self.components[name]

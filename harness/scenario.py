@@ -6,11 +6,21 @@ stop, communication step) and the signals to record.  See
 ``scenarios/pendulum_case1.toml`` for the format.  The controller variant
 (``vud``, ``fixed``, ``fae``) is chosen at run time and set on the
 instance named by ``controller_instance``.
+
+Every table and key a file may hold is declared once, in :data:`SCHEMA`: :func:`parse` checks a
+file against it (an unknown table or key with its close match, a missing key, a value of the wrong
+type or out of range: one line naming the file, the table and the key), and the table of scenario
+keys in docs/master.md is generated from it (:func:`keys_markdown`, ``python build_fmu.py --docs``).
+Names that only the FMUs know (parameters, variables) are checked against their model
+descriptions by harness/master.py.
 """
 from __future__ import annotations
 
 import copy
+import difflib
 import math
+import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,7 +32,6 @@ except ModuleNotFoundError:  # Python 3.10
 from .variants import CONTROLLER_VARIANTS
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
-SIGNAL_ROLES = ("e", "de", "ym", "dym", "u", "d2e", "d3e")  # d2e, d3e: plants of order 3, 4
 
 
 class ScenarioError(ValueError):
@@ -113,7 +122,46 @@ class Scenario:
         count = round((self.stop - self.start) / self.step)
         if count < 1:
             raise ScenarioError(f"stop - start = {self.stop - self.start} is shorter than one step {self.step}")
+        check_record_memory(count, len(self.record), self.start, self.step)
         return count
+
+
+RECORD_MEMORY_SHARE = 0.5  # a run's record may take at most this share of the machine's memory
+
+
+def physical_memory() -> int | None:
+    """Bytes of physical memory (None where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _bytes_text(count: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if count < 1024 or unit == "PiB":
+            return f"{count:.3g} {unit}"
+        count /= 1024
+    return f"{count:.3g} PiB"
+
+
+def check_record_memory(steps: int, recorded: int, start: float, step: float, memory: int | None = None):
+    """The master keeps every communication step of every recorded signal (and the time) in memory,
+    8 bytes each: refuse a run whose record needs more than RECORD_MEMORY_SHARE of the machine's
+    memory, naming the limit in steps and in stop time."""
+    memory = physical_memory() if memory is None else memory
+    if not memory:
+        return
+    per_row = 8 * (recorded + 1)
+    limit = int(RECORD_MEMORY_SHARE * memory // per_row) - 1
+    if steps <= limit:
+        return
+    raise ScenarioError(f"stop = {start + steps * step:g} s at step {step:g} s is {steps:.3g} steps: the master "
+                        f"keeps every step of the {recorded} recorded signals and the time in memory "
+                        f"({_bytes_text(float(steps + 1) * per_row)}), more than {RECORD_MEMORY_SHARE:.0%} of "
+                        f"this machine's {_bytes_text(memory)}; give a stop of at most "
+                        f"{start + limit * step:.4g} s at this step (a longer step or fewer [record] variables "
+                        "allow a longer run)")
 
 
 def configure(name_or_path, controller: str | None = None, step: float | None = None,
@@ -185,47 +233,214 @@ def load(name_or_path) -> Scenario:
     return parse(data, path)
 
 
-def _require(table: dict, key: str, where: str):
-    if key not in table:
-        raise ScenarioError(f"{where}: missing key {key!r}")
-    return table[key]
+# ----------------------------------------------------------------- the schema
+# One declaration table of every table and key a scenario file may hold: parse() validates a file
+# against it and docs/master.md's table of scenario keys is generated from it (keys_markdown()).
+
+ANY_INSTANCE, ANY_PARAMETER, ANY_SIGNAL = "INSTANCE", "PARAMETER", "INSTANCE.VARIABLE"  # names the user chooses
+CHOSEN_NAMES = (ANY_INSTANCE, ANY_PARAMETER, ANY_SIGNAL)
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_dotted(value) -> bool:
+    return isinstance(value, str) and re.fullmatch(r"[^.\s]+\.[^\s]+", value) is not None
+
+
+@dataclass(frozen=True)
+class Kind:
+    """What a value must be: ``text`` names it in messages and in the docs' table."""
+
+    text: str
+    accepts: object  # value -> bool (for an array: the array itself; its elements: ``element``)
+    table: bool = False  # a table whose keys the schema declares in turn
+    element: "Kind | None" = None  # an array of values of this kind
+
+
+TEXT = Kind("a string", lambda v: isinstance(v, str))
+NUMBER = Kind("a finite number", lambda v: _is_number(v) and math.isfinite(v))
+POSITIVE = Kind("a finite number > 0", lambda v: _is_number(v) and math.isfinite(v) and v > 0)
+DOTTED = Kind('a string "INSTANCE.VARIABLE"', _is_dotted)
+DOTTED_LIST = Kind('an array of strings "INSTANCE.VARIABLE"', lambda v: isinstance(v, list), element=DOTTED)
+PARAMETER_VALUE = Kind("a finite number (true or false for a Boolean parameter)",
+                       lambda v: isinstance(v, bool) or (_is_number(v) and math.isfinite(v)))
+TABLE = Kind("a table", lambda v: isinstance(v, dict), table=True)
+TABLES = Kind("an array of tables", lambda v: isinstance(v, list), element=TABLE)
+
+REQUIRED = object()  # the default of a key that must be given
+
+
+@dataclass(frozen=True)
+class Described:
+    """A default the docs describe in words (not a value of the file)."""
+
+    text: str
+
+
+@dataclass(frozen=True)
+class Key:
+    table: str  # "" (top level), "experiment", "components.INSTANCE", ...
+    name: str  # the key, or ANY_* for a name the user chooses
+    kind: Kind
+    default: object  # REQUIRED, or the value a missing key takes
+    meaning: str
+
+    @property
+    def path(self) -> str:
+        return f"{self.table}.{self.name}" if self.table else self.name
+
+
+#: every table and key of a scenario file (docs/master.md shows this table, generated by keys_markdown())
+SCHEMA = (
+    Key("", "name", TEXT, Described("the file's name"), "the scenario's name in reports and file names"),
+    Key("", "description", TEXT, "", "one line: what the scenario is"),
+    Key("", "controller_instance", TEXT, "controller",
+        "the component whose `variant` parameter `--controller` sets; one of [components]"),
+    Key("", "experiment", TABLE, REQUIRED, "the time grid of the run"),
+    Key("experiment", "start", NUMBER, 0.0, "start time (s)"),
+    Key("experiment", "stop", NUMBER, REQUIRED, "stop time (s), > start, a whole number of steps from it"),
+    Key("experiment", "step", POSITIVE, REQUIRED, "communication step (s)"),
+    Key("experiment", "divergence_bound", POSITIVE, 1e8,
+        "a run stops as diverged when a connected or recorded signal without its own [bounds] entry "
+        "reaches this magnitude or is not finite"),
+    Key("", "components", TABLE, REQUIRED, "the FMU instances, one table each"),
+    Key("components", ANY_INSTANCE, TABLE, Described("one or more"), "one FMU instance; its name has no '.'"),
+    Key("components.INSTANCE", "fmu", TEXT, REQUIRED,
+        "a model identifier built by build_fmu.py (AdaptiveFuzzyController, InvertedPendulum, Manipulator, "
+        "DcMotorArm, TrackingReference) or the path of an .fmu file, relative to the scenario file"),
+    Key("components.INSTANCE", "parameters", TABLE, {}, "parameter values by name"),
+    Key("components.INSTANCE.parameters", ANY_PARAMETER, PARAMETER_VALUE, Described("any number"),
+        "a parameter of the FMU (name, Integer and Boolean checked against its model description, the "
+        "range by the FMU when initialisation ends)"),
+    Key("", "connections", TABLES, [], "one [[connections]] table per connection"),
+    Key("connections", "from", DOTTED, REQUIRED, "an output"),
+    Key("connections", "to", DOTTED, REQUIRED, "an input (each input connected once)"),
+    Key("", "bounds", TABLE, {}, "divergence bounds of single signals"),
+    Key("bounds", ANY_SIGNAL, POSITIVE, Described("any number"),
+        "a connected or recorded output and its own divergence bound (instead of divergence_bound)"),
+    Key("", "signals", TABLE, REQUIRED, "the recorded signals the scores read"),
+    *(Key("signals", role, DOTTED, REQUIRED if role in ("e", "de", "ym", "dym", "u") else None, meaning)
+      for role, meaning in (("e", "tracking error e = ym - y"), ("de", "its derivative"),
+                            ("ym", "the reference"), ("dym", "its derivative"), ("u", "the control input"),
+                            ("d2e", "second derivative of e (plants of order >= 3)"),
+                            ("d3e", "third derivative of e (plants of order 4)"))),
+    Key("", "record", TABLE, {}, "what is recorded at every communication step"),
+    Key("record", "variables", DOTTED_LIST, [], "the outputs recorded (every signal of [signals] among them)"),
+)
+SIGNAL_ROLES = tuple(key.name for key in SCHEMA if key.table == "signals")
+
+
+def did_you_mean(name: str, choices) -> str:
+    """``" (did you mean 'stop'?)"``: the close match of a misspelt name among ``choices``, or ''."""
+    close = difflib.get_close_matches(str(name), [str(c) for c in choices], n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _shown(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _check_table(data: dict, table: str, dotted: str, shown: str, where: str):
+    """Check one table of the file against SCHEMA (``table``: its schema name, e.g.
+    ``components.INSTANCE``; ``dotted``: its name in the file; ``shown``: how messages name it)."""
+    keys = [key for key in SCHEMA if key.table == table]
+    named = {key.name: key for key in keys if key.name not in CHOSEN_NAMES}
+    chosen = next((key for key in keys if key.name in CHOSEN_NAMES), None)
+    prefix = f"{where}: {shown} " if shown else f"{where}: "
+    for name, value in data.items():
+        key = named.get(name, chosen)
+        if key is None:
+            place = "" if shown else " at the top level"
+            raise ScenarioError(f"{prefix}unknown key {name!r}{place}{did_you_mean(name, named)}; "
+                                f"valid: {', '.join(named)}")
+        if key.name == ANY_INSTANCE and "." in name:
+            raise ScenarioError(f"{prefix}instance name {name!r} must not contain '.'")
+        if key.name == ANY_SIGNAL and not _is_dotted(name):
+            raise ScenarioError(f"{prefix}{name!r} is not a signal name; write \"INSTANCE.VARIABLE\" = bound")
+        if not key.kind.accepts(value):
+            raise ScenarioError(f"{prefix}{name} = {_shown(value)} is not {key.kind.text}")
+        element = key.kind.element
+        for index, item in enumerate(value if element is not None else ()):
+            if not element.accepts(item):
+                raise ScenarioError(f"{prefix}{name}: element {index + 1} = {_shown(item)} is not {element.text} "
+                                    f"({name} is {key.kind.text})")
+        child = f"{dotted}.{name}" if dotted else name
+        if key.kind.table:
+            _check_table(value, key.path, child, f"[{child}]", where)
+        if element is not None and element.table:
+            for index, item in enumerate(value):
+                _check_table(item, key.path, child, f"[[{child}]] {index + 1}:", where)
+    for name, key in named.items():
+        if key.default is REQUIRED and name not in data:
+            raise ScenarioError(f"{prefix}missing key {name!r} ({key.kind.text}: {key.meaning})")
+
+
+def _value(data: dict, table: str, name: str):
+    """The value of a key of the file, or its default."""
+    key = next(k for k in SCHEMA if k.table == table and k.name == name)
+    return data.get(name, copy.deepcopy(key.default))
 
 
 def parse(data: dict, path: Path | None = None) -> Scenario:
+    """A Scenario from the data of a scenario file, checked against SCHEMA: every mistake is one
+    ScenarioError naming the file, the table and the key (and the close match of a misspelt name)."""
     where = str(path or "scenario")
-    experiment = _require(data, "experiment", where)
-    components = {}
-    for name, table in _require(data, "components", where).items():
-        if "." in name:
-            raise ScenarioError(f"{where}: instance name {name!r} must not contain '.'")
-        components[name] = ComponentSpec(name, str(_require(table, "fmu", f"{where}: components.{name}")),
-                                         dict(table.get("parameters", {})))
-    connections = []
-    for index, table in enumerate(data.get("connections", [])):
-        connection = Connection(str(_require(table, "from", f"{where}: connection {index + 1}")),
-                                str(_require(table, "to", f"{where}: connection {index + 1}")))
-        connections.append(connection)
-    record = list(data.get("record", {}).get("variables", []))
-    signals = dict(data.get("signals", {}))
+    _check_table(data, "", "", "", where)
+    experiment = data["experiment"]
+    start, stop, step = (float(_value(experiment, "experiment", name)) for name in ("start", "stop", "step"))
+    if not stop > start:
+        raise ScenarioError(f"{where}: [experiment] stop = {_shown(experiment['stop'])} is not > start = {start:g}")
+    components = {name: ComponentSpec(name, table["fmu"], dict(_value(table, "components.INSTANCE", "parameters")))
+                  for name, table in data["components"].items()}
+    if not components:
+        raise ScenarioError(f"{where}: [components] has no instance; give one table [components.NAME] per FMU")
+    controller_instance = _value(data, "", "controller_instance")
+    if controller_instance not in components:
+        raise ScenarioError(f"{where}: controller_instance = {controller_instance!r} is not a component"
+                            f"{did_you_mean(controller_instance, components)}; valid: {', '.join(components)}")
+    record = _value(data, "", "record")
     scenario = Scenario(
-        name=str(data.get("name", path.stem if path else "scenario")),
-        description=str(data.get("description", "")),
-        start=float(experiment.get("start", 0.0)),
-        stop=float(_require(experiment, "stop", f"{where}: experiment")),
-        step=float(_require(experiment, "step", f"{where}: experiment")),
-        components=components, connections=connections, record=record, signals=signals,
-        controller_instance=str(data.get("controller_instance", "controller")),
-        divergence_bound=float(experiment.get("divergence_bound", 1e8)),
-        bounds={str(name): float(value) for name, value in data.get("bounds", {}).items()},
+        name=data.get("name", path.stem if path else "scenario"),
+        description=_value(data, "", "description"),
+        start=start, stop=stop, step=step,
+        components=components,
+        connections=[Connection(table["from"], table["to"]) for table in _value(data, "", "connections")],
+        record=list(_value(record, "record", "variables")),
+        signals=dict(data["signals"]),
+        controller_instance=controller_instance,
+        divergence_bound=float(_value(experiment, "experiment", "divergence_bound")),
+        bounds={name: float(value) for name, value in _value(data, "", "bounds").items()},
         path=path,
     )
-    for name, value in scenario.bounds.items():
-        if not value > 0:
-            raise ScenarioError(f"{where}: bounds.{name} = {value!r} must be > 0")
-    for role in signals:
-        if role not in SIGNAL_ROLES:
-            raise ScenarioError(f"{where}: unknown signal role {role!r}; valid: {', '.join(SIGNAL_ROLES)}")
-    if not scenario.step > 0 or not scenario.stop > scenario.start:
-        raise ScenarioError(f"{where}: need step > 0 and stop > start (step = {scenario.step}, "
-                            f"start = {scenario.start}, stop = {scenario.stop})")
+    try:
+        _ = scenario.steps  # at least one step, and a record that fits in memory
+    except ScenarioError as error:
+        raise ScenarioError(f"{where}: [experiment] {error}") from None
     return scenario
+
+
+def _default_text(default) -> str:
+    if default is REQUIRED:
+        return "**required**"
+    if default is None:
+        return "optional"
+    if default in ({}, []):
+        return "empty"
+    if isinstance(default, Described):
+        return default.text
+    if isinstance(default, float):
+        return f"`{default:g}`"
+    return f'`"{default}"`'
+
+
+def keys_markdown() -> str:
+    """The table of scenario keys of docs/master.md, from SCHEMA."""
+    lines = ["| table | key | value | default | meaning |", "|---|---|---|---|---|"]
+    for key in SCHEMA:
+        table = "`[[connections]]`" if key.table == "connections" else f"`[{key.table}]`" if key.table else "(top)"
+        value = key.kind.text.replace("|", "\\|")
+        lines.append(f"| {table} | `{key.name}` | {value} | {_default_text(key.default)} | {key.meaning} |")
+    return "\n".join(lines)

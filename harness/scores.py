@@ -3,6 +3,12 @@
 Trapezoidal integration; ||e|| = sqrt(e^2 + de^2 + ...), the norm of the whole
 error vector (e, de, d2e, ... up to the plant's order; sqrt(e^2 + de^2) for the paper's plants).  Pure functions of numpy
 arrays so they can be tested on signals with known answers.
+
+A score that a run cannot give is None, never a number that looks like one: es1 and es2 on a
+horizon shorter than the reference period they are taken over, ts of a run that has not settled by
+its stop time.  :func:`undefined_reason` is the one place that decides it for a run's horizon, and
+:func:`why_none` says why a score is None; the run command (text and JSON ``null``), the tables, the
+claims and the report's header all ask them.
 """
 from __future__ import annotations
 
@@ -11,6 +17,54 @@ import math
 import numpy as np
 
 SCORE_KEYS = ("ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec", "umax", "tv_u")
+REFERENCE_PERIOD = 2 * math.pi  # of ym = A sin t, every scenario's reference: the window of es1, es2
+PERIOD_SCORES = ("es1_pct", "es2_pct")  # taken over the last reference period [T - 2 pi, T]
+SETTLING_BAND = 0.05  # ts: |e| within 5 % of max|ym| (docs/model.md section 10, choice 13 (settling time))
+NOT_SETTLED = "not settled"
+#: what each score is, for reports (docs/model.md section 9 (scores)); units: harness/units.py score_units
+DEFINITIONS = {
+    "ts": "settling time: the earliest time after which |e| <= 5 % of max|ym| until the stop time T "
+          "(not settled: no such time)",
+    "es1_pct": "steady-state error of e: 100 max|e| / max|ym| over the last reference period [T - 2 pi, T]",
+    "es2_pct": "steady-state error of de: 100 max|de| / max|dym| over the same window",
+    "ITAE": "integral of t ||e|| dt over [0, T], ||e|| = sqrt(e^2 + de^2 (+ d2e^2 for order 3)), its terms "
+            "taken as numbers in the unit of e",
+    "IAE": "integral of ||e|| dt over [0, T]",
+    "Ec": "control energy: integral of u^2 dt over [0, T]",
+    "umax": "largest |u|",
+    "tv_u": "total variation of u per second, sum |u(k+1) - u(k)| / T (chattering)",
+}
+
+
+def undefined_reason(metric: str, start: float, stop: float, period: float = REFERENCE_PERIOD) -> str | None:
+    """Why score ``metric`` is not defined for a run over [start, stop] s; None when it is.
+
+    es1 and es2 are taken over the last reference period [T - 2 pi, T]: a shorter horizon has none.
+    Every other score is defined on any horizon (ts may still be "not settled": :func:`why_none`).
+    """
+    if metric in PERIOD_SCORES and stop - start < period - 1e-9:
+        length = "2 pi s" if period == REFERENCE_PERIOD else f"{period:.6g} s"
+        return (f"the horizon {stop - start:.6g} s is shorter than the reference period, {length}, "
+                "over which es1 and es2 are taken")
+    return None
+
+
+def why_none(metric: str, start: float, stop: float) -> str:
+    """Why a run over [start, stop] s has no value (None) for ``metric``."""
+    reason = undefined_reason(metric, start, stop)
+    if reason is not None:
+        return reason
+    if metric == "ts":
+        return (f"|e| is outside the {100 * SETTLING_BAND:g} % band of max|ym| at the stop time {stop:g} s, "
+                "or enters it only at the last step")
+    return "the run gave no value"
+
+
+def value_text(metric: str, value, start: float, stop: float, digits: str = ".6g") -> str:
+    """A score for people: the number, ``not settled`` (ts) or ``n/a`` (not defined on the horizon)."""
+    if value is not None:
+        return format(value, digits)
+    return NOT_SETTLED if metric == "ts" and undefined_reason(metric, start, stop) is None else "n/a"
 
 
 def trapezoid(values: np.ndarray, time: np.ndarray) -> float:
@@ -40,25 +94,29 @@ def control_energy(time, u) -> float:
     return trapezoid(u * u, time)
 
 
-def settling_time(time, e, ym, fraction: float = 0.05) -> float:
+def settling_time(time, e, ym, fraction: float = SETTLING_BAND) -> float | None:
     """ts: the earliest time after which |e| <= fraction * max|ym| until T
     (docs/model.md section 10, choice 13 (settling time)).
 
-    0 if |e| stays inside the band from the start; T (the last time) if the
-    last sample is outside it, i.e. the run never settles.
+    The start time if |e| stays inside the band from the start; None (not settled) if |e| is
+    outside the band at the last sample or enters it only there: the run shows no time after
+    which the error stays small.
     """
     band = fraction * float(np.max(np.abs(ym)))
     outside = np.flatnonzero(np.abs(e) > band)
     if outside.size == 0:
         return float(time[0])
     last = outside[-1]
-    if last + 1 >= len(time):
-        return float(time[-1])
+    if last + 2 >= len(time):  # outside at the last sample, or inside at the last sample only
+        return None
     return float(time[last + 1])
 
 
-def steady_state_errors(time, e, de, ym, dym, period: float = 2 * math.pi) -> tuple[float, float]:
-    """(es1_pct, es2_pct): 100 max|e|, 100 max|de| over [T - period, T], over max|ym|, max|dym|."""
+def steady_state_errors(time, e, de, ym, dym, period: float = REFERENCE_PERIOD) -> tuple:
+    """(es1_pct, es2_pct): 100 max|e|, 100 max|de| over [T - period, T], over max|ym|, max|dym|;
+    (None, None) when the run is shorter than ``period`` (:func:`undefined_reason`)."""
+    if undefined_reason("es1_pct", float(time[0]), float(time[-1]), period) is not None:
+        return None, None
     window = time >= time[-1] - period - 1e-12
     es1 = 100.0 * float(np.max(np.abs(e[window]))) / float(np.max(np.abs(ym)))
     es2 = 100.0 * float(np.max(np.abs(de[window]))) / float(np.max(np.abs(dym)))
@@ -73,7 +131,7 @@ def total_variation_rate(time, u) -> float:
 
 def score(time, e, de, ym, dym, u, higher=()) -> dict:
     """Every score of docs/model.md section 9 (scores) for one run; ``higher`` = (d2e, ...) for plants of
-    order > 2."""
+    order > 2.  A score the run cannot give is None (:func:`why_none` says why)."""
     es1, es2 = steady_state_errors(time, e, de, ym, dym)
     return {
         "ts": settling_time(time, e, ym),

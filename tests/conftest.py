@@ -22,6 +22,15 @@ def fmu_paths():
     return build_fmu.ensure_built()
 
 
+@pytest.fixture(scope="session")
+def lag_plant_fmu(tmp_path_factory):
+    """A user's plant FMU that the project does not ship (tests/data/first_order_lag_fmu.py), built once."""
+    import build_fmu
+
+    return build_fmu.build_script(ROOT / "tests" / "data" / "first_order_lag_fmu.py",
+                                  tmp_path_factory.mktemp("lag_plant") / "FirstOrderLag.fmu", [])
+
+
 @pytest.fixture(scope="module")
 def unzipped(fmu_paths, tmp_path_factory):
     """{model identifier: extracted FMU folder}, extracted once per test module."""

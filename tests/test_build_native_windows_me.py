@@ -2,14 +2,14 @@
 
 tests/c_host/me_host.c integrates one FMU alone through its Model Exchange interface (fixed-step
 RK4 via SetTime / SetContinuousStates / GetDerivatives, events at the step ends); it is built for
-Linux and for Windows with zig, as tests/test_native_windows.py builds its co-simulation host, and
+Linux and for Windows with zig, as tests/test_build_native_windows.py builds its co-simulation host, and
 fed the same inputs.  The test checks
 
 * the Linux host computes what the same sequence of calls through fmpy's FMU2Model / FMU3Model
   computes (tests/me_helpers.py), bit for bit: the host drives the FMU as intended;
 * the Windows DLL under wine gives the Linux .so's values to ``WINDOWS_TOLERANCE`` of each
   column's range (the DLL carries zig's libm, one ulp off glibc's on a few percent of arguments:
-  tests/test_native_windows.py), through the manipulator's friction events (same event count).
+  tests/test_build_native_windows.py), through the manipulator's friction events (same event count).
 """
 import hashlib
 import math
@@ -24,8 +24,9 @@ import numpy as np
 import pytest
 
 import build_native
+import c_toolchain
 from tests import me_helpers as me
-from tests.test_native_windows import (DEFAULT_PREFIX, run_with_files, scaled_difference, wine,  # noqa: F401
+from tests.test_build_native_windows import (DEFAULT_PREFIX, run_with_files, scaled_difference, wine,  # noqa: F401
                                        wine_program)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,7 +67,7 @@ def native():
 
 def _build(target: str, name: str, *extra: str) -> Path:
     arguments = ["cc", "-target", target, "-std=c11", "-O2", "-Wall", "-Wextra", "-Werror", *extra]
-    digest = hashlib.sha256("\0".join([build_native._zig_version(), *arguments]).encode() + SOURCE.read_bytes())
+    digest = hashlib.sha256("\0".join([c_toolchain.zig_version(), *arguments]).encode() + SOURCE.read_bytes())
     folder = build_native.WORK_DIR / "hosts"
     binary = folder / f"{Path(name).stem}-{digest.hexdigest()[:16]}{Path(name).suffix}"
     if not binary.exists():

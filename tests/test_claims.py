@@ -136,7 +136,7 @@ def test_a_failed_run_leaves_its_comparisons_undecided():
     ladder_set[("pendulum_case2", "fae")][1]["status"] = "diverged"
     claim = claim_on(ladder_set, "ITAE")
     assert claim.verdict == UNDECIDED
-    assert any("run failed" in d for d in claim.details)
+    assert any("pendulum_case2: no ITAE (fae: run diverged)" in d for d in claim.details)
 
 
 def test_disturbance_claim_within_outside_and_at_the_tolerance():
@@ -206,3 +206,43 @@ def test_refinement_runs_the_open_cases_at_half_their_finest_step_and_decides_ag
     requested.clear()
     assert tables.refine_open_claims(ladders(), stop=None, jobs=1, levels=3)[1] == []
     assert requested == []  # nothing open: nothing run
+
+
+# ------------------------------------------------------------------ issue 23: close margins, undefined scores
+def test_a_comparison_decided_by_a_small_margin_says_close():
+    """Case 1 Ec of our run: fae 418.114 +- 0.092 below vud 418.2182 +- 0.0071, a gap of 0.02 %."""
+    ladder_set = ladders({("pendulum_case1", "vud", "Ec"): (418.2253, 418.2182),
+                          ("pendulum_case1", "fixed", "Ec"): (430.5, 430.5),
+                          ("pendulum_case1", "fae", "Ec"): (418.206, 418.114)})
+    claim = claim_on(ladder_set, "Ec")
+    assert claim.verdict == NOT_REPRODUCED
+    assert "fae 418.114 ± 0.092 (h = 0.0002 s; vud just above (close: by 0.025 %): gap 0.104 > error 0.0991)" \
+        in claim.details[0], claim.details[0]
+    assert claim.close == ["pendulum_case1 (Ec: vud vs fae by 0.025 %)"]
+    bullet = next(line for line in claims.claims_markdown([claim]) if line.startswith("- **"))
+    assert bullet.endswith("(close: decided by a margin under 1 % of the values, beyond the numerical error: "
+                           "pendulum_case1 (Ec: vud vs fae by 0.025 %))"), bullet
+    clear = claim_on(ladders({("pendulum_case1", "fae", "Ec"): (0.5001, 0.5)}), "Ec")  # fae at half of vud
+    assert clear.verdict == NOT_REPRODUCED and clear.close == [] and "clearly above" in clear.details[0]
+    wins = claims.claims_check(ladders())  # 1.0 against 2.0 and 3.0: nothing close
+    assert all(not c.close for c in wins)
+    assert all("close" not in line for line in claims.claims_markdown(wins))
+
+
+def test_a_score_the_horizon_does_not_define_decides_nothing_and_asks_no_finer_run():
+    """Issue 23, item 2: on a 0.3 s run es1, es2 are n/a in the tables, so the claims must not decide them."""
+    ladder_set = ladders()
+    for rows in ladder_set.values():
+        for row in rows:
+            row.update(start=0.0, stop=0.3, es1_pct=None, es2_pct=None)
+    for metric in ("es1_pct", "es2_pct"):
+        claim = claim_on(ladder_set, metric)
+        assert claim.verdict == UNDECIDED and not claim.open_cases
+        assert claim.details[0] == (f"pendulum_case1: no {metric} (vud, fixed, fae: the horizon 0.3 s is shorter than "
+                                    "the reference period, 2 pi s, over which es1 and es2 are taken)")
+    unsettled = ladders()
+    unsettled[("manipulator", "vud")][1].update(ts=None, start=0.0, stop=0.3)
+    claim = claim_on(unsettled, "ts")
+    assert claim.verdict == UNDECIDED and not claim.open_cases
+    assert claim.details[-1].startswith("manipulator: no ts (vud: |e| is outside the 5 % band of max|ym| at the stop "
+                                        "time 0.3 s"), claim.details[-1]

@@ -13,15 +13,24 @@ process, and stop before any long run.
 from __future__ import annotations
 
 import argparse
+import copy
+import functools
+import json
 import zipfile
 
 import pytest
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
 from harness import cli, cli_args
+from harness import scenario as scenarios
 
 NUMERIC_TYPES = {cli_args.positive_float: True, cli_args.positive_int: True,
                  cli_args.non_negative_float: False, cli_args.non_negative_int: False}  # type -> zero is bad
-BAD_NUMBERS = ("abc", "nan", "inf", "-inf", "-1")
+BAD_NUMBERS = ("abc", "nan", "inf", "-inf", "-1", "-1e-4")  # "-1e-4": a value, not an option (issue 23)
 
 
 def subparsers() -> dict:
@@ -155,6 +164,7 @@ def test_every_bad_argument_of_every_subcommand_is_one_line_and_exit_2(files, no
             assert code == 2, f"exit {code}"
             line = _one_error_line(captured.err)
             assert expected in line, f"{expected!r} not in {line!r}"
+            assert "expected one argument" not in line, "a negative number was read as an option"
         except AssertionError as error:
             failures.append(f"{case_id}: {argv}: {error}")
     assert not failures, "\n".join(failures)
@@ -218,7 +228,8 @@ def test_mistakes_a_command_finds_are_one_line_with_the_right_status(case_id, ar
 def test_fmi3_fmus_are_refused_where_ssp_engines_take_them(command, monkeypatch, capsys):
     argv = [command, "pendulum_case1"] if command != "hosts" else [command]
     assert cli.main([*argv, "--edition", "native3"]) == 2
-    assert "invalid choice: 'native3' (choose from 'python', 'native')" in _one_error_line(capsys.readouterr().err)
+    assert "invalid choice: 'native3'; did you mean 'native'? (choose from 'python', 'native')" in \
+        _one_error_line(capsys.readouterr().err)
     monkeypatch.setenv("AFC_EDITION", "native3")
     assert cli.main(argv) == 2
     assert _one_error_line(capsys.readouterr().err) == (
@@ -244,11 +255,136 @@ def test_the_last_resort_handler_turns_any_exception_into_one_line(monkeypatch, 
     assert "something internal" in line and "with a second line" in line
 
 
+def misspelt_option(option: str) -> str:
+    """--controller -> --contoller: one letter of the name left out (the issue's example)."""
+    name = option[2:]
+    return "--" + name[:5] + name[6:] if len(name) > 6 else "--" + name[:1] + name[2:]
+
+
+def test_a_misspelt_option_or_choice_gets_its_close_match(no_handler, capsys):
+    """Issue 23, item 3: "--contoller" said only "unrecognized arguments"; argparse before 3.14 suggests nothing."""
+    assert cli.main(["run", "pendulum_case1", "--contoller", "vud"]) == 2
+    assert _one_error_line(capsys.readouterr().err) == (
+        "python -m harness run: error: unrecognized option --contoller; did you mean --controller? "
+        "(see python -m harness run --help)")
+    failures, tried = [], 0
+    for name, parser in subparsers().items():
+        options = [o for a in parser._actions for o in a.option_strings if o.startswith("--") and o != "--help"]
+        for option in options:
+            wrong = misspelt_option(option)
+            if any(o.startswith(wrong) for o in options):  # an abbreviation argparse accepts
+                continue
+            tried += 1
+            code = cli.main([name, wrong])
+            line = _one_error_line(capsys.readouterr().err)
+            if code != 2 or f"unrecognized option {wrong}; did you mean {option}?" not in line:
+                failures.append(f"{name} {wrong}: {line}")
+    assert not failures and tried > 50, "\n".join(failures)
+    assert cli.main(["tabels"]) == 2
+    assert "invalid choice: 'tabels'; did you mean 'tables'? (choose from 'run', 'tables'," in capsys.readouterr().err
+    assert cli.main(["run", "pendulum_case1", "--controller", "vdu"]) == 2
+    assert "invalid choice: 'vdu'; did you mean 'vud'? (choose from 'vud', 'fixed', 'fae')" in capsys.readouterr().err
+    assert cli.main(["run", "pendulum_case1", "--zzz"]) == 2
+    assert "unrecognized option --zzz; valid: --algorithm, --atol, --controller, --edition, " in capsys.readouterr().err
+
+
+def test_a_negative_number_in_any_notation_is_a_value_refused_with_the_valid_range(no_handler, capsys):
+    """Issue 23, item 3: "--step -1e-4" was read as an option ("expected one argument")."""
+    for value in ("-1e-4", "-1E+3", "-.5", "-2.", "-inf", "-Infinity", "-nan"):
+        assert cli.main(["run", "pendulum_case1", "--step", value]) == 2
+        line = _one_error_line(capsys.readouterr().err)
+        assert line.startswith(f"python -m harness run: error: argument --step: ") and "give a finite number > 0" in line, \
+            line
+
+
+# ------------------------------------------------ scenario-file mutations
+def toml_text(data: dict) -> str:
+    """A scenario's data as TOML: every top-level key with an inline value (tomllib reads it back equal)."""
+    def value(item):
+        if isinstance(item, bool):
+            return "true" if item else "false"
+        if isinstance(item, (int, float)):
+            return repr(item)
+        if isinstance(item, str):
+            return json.dumps(item)
+        if isinstance(item, list):
+            return "[" + ", ".join(value(x) for x in item) + "]"
+        return "{ " + ", ".join(f"{json.dumps(k)} = {value(v)}" for k, v in item.items()) + " }"
+    return "".join(f"{json.dumps(key)} = {value(item)}\n" for key, item in data.items())
+
+
+def key_paths(data, path=()):
+    """(path, value) of every key of the file, tables and arrays of tables included, and of every
+    element of an array of strings (its path ends with the element's index)."""
+    items = data.items() if isinstance(data, dict) else enumerate(data)
+    for key, item in items:
+        yield (*path, key), item
+        if isinstance(item, dict) or (isinstance(item, list) and all(isinstance(x, (dict, str)) for x in item)):
+            yield from key_paths(item, (*path, key))
+
+
+def misspelt(name: str) -> str:
+    return name[:2] + name[3:] if len(name) >= 4 else name + name[-1]
+
+
+def wrong_type(value):
+    if isinstance(value, str):
+        return 5
+    return "text" if isinstance(value, (bool, int, float)) else 5
+
+
+def scenario_mutations() -> list:
+    """(id, data, the name the error line must hold): every key misspelt once, every value of the wrong type."""
+    original = tomllib.loads((scenarios.SCENARIO_DIR / "pendulum_case1.toml").read_text())
+    mutations = []
+    for path, item in key_paths(original):
+        *parents, last = path
+        shown = ".".join(map(str, path))
+        named = next(str(p) for p in reversed(path) if isinstance(p, str))  # an element is named by its array
+        data = copy.deepcopy(original)
+        parent = functools.reduce(lambda table, key: table[key], parents, data)
+        parent[last] = wrong_type(item)
+        mutations.append((f"{shown} of the wrong type", data, named))
+        if isinstance(last, str):
+            data = copy.deepcopy(original)
+            parent = functools.reduce(lambda table, key: table[key], parents, data)
+            renamed = {(misspelt(k) if k == last else k): v for k, v in parent.items()}
+            parent.clear()
+            parent.update(renamed)
+            mutations.append((f"{shown} misspelt", data, misspelt(last)))
+    return mutations
+
+
+def test_every_scenario_key_misspelt_and_every_value_of_the_wrong_type_is_one_line_and_exit_2(fmu_paths, tmp_path,
+                                                                                                 capsys):
+    """Issue 23, item 1: a scenario file is checked as strictly as the command line."""
+    mutations = scenario_mutations()
+    assert len(mutations) > 150  # every key of pendulum_case1.toml twice, every recorded name once
+    failures = []
+    for number, (case_id, data, name) in enumerate(mutations):
+        path = tmp_path / f"mutant_{number}.toml"
+        path.write_text(toml_text(data))
+        assert tomllib.loads(path.read_text()) == data
+        code = cli.main(["run", str(path), "--stop", "0.01"])
+        captured = capsys.readouterr()
+        try:
+            assert "Traceback" not in captured.out + captured.err
+            assert code == 2, f"exit {code}"
+            line = _one_error_line(captured.err)
+            assert str(path) in line, f"the file is not named: {line}"
+            assert name in line, f"{name!r} not named: {line}"
+        except AssertionError as error:
+            failures.append(f"{case_id}: {error}")
+    assert not failures, f"{len(failures)} of {len(mutations)}:\n" + "\n".join(failures)
+
+
 # ------------------------------------------------ warnings, --apply, outputs
 def test_es1_es2_are_marked_n_a_on_a_horizon_shorter_than_the_reference_period(fmu_paths, capsys):
     assert cli.main(["run", "pendulum_case1", "--stop", "0.5"]) == 0
     short = capsys.readouterr().out
-    assert "es1_pct  n/a (stop < 2 pi" in short and "es2_pct  n/a (stop < 2 pi" in short
+    assert "es1_pct  n/a (the horizon 0.5 s is shorter than the reference period, 2 pi s, over which es1 and es2 " \
+           "are taken)" in short and "es2_pct  n/a (the horizon 0.5 s" in short
+    assert "ts       not settled (|e| is outside the 5 % band of max|ym| at the stop time 0.5 s" in short
     assert cli.main(["run", "pendulum_case1", "--stop", "6.4", "--step", "1e-3"]) == 0
     long = capsys.readouterr().out
     assert "n/a" not in long and float(long.split("es1_pct")[1].split()[0]) > 0

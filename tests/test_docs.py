@@ -3,6 +3,7 @@ import re
 from pathlib import Path
 
 import build_fmu
+from harness import scenario as scenarios
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "docs" / "model.md"
@@ -12,6 +13,14 @@ LINK = re.compile(r"\]\(([^)\s]+)\)")
 def test_model_doc_variable_tables_are_generated_from_the_declarations():
     text = MODEL.read_text()
     assert build_fmu.with_variable_tables(text) == text, "run: python build_fmu.py --docs"
+
+
+def test_master_doc_scenario_keys_are_generated_from_the_schema():
+    """docs/master.md's table of scenario keys is harness/scenario.py's SCHEMA, the one the check uses."""
+    text = (ROOT / "docs" / "master.md").read_text()
+    assert build_fmu.with_scenario_keys(text) == text, "run: python build_fmu.py --docs"
+    for key in scenarios.SCHEMA:
+        assert f"| `{key.name}` |" in text
 
 
 def test_the_tables_cover_every_fmu_and_every_declared_variable():
@@ -70,7 +79,8 @@ def test_the_contents_page_lists_every_page_and_the_readme_links_the_contents():
 
 
 def test_no_page_cites_the_projects_working_notes():
-    """A "SPEC" citation points outside the repository: cite the docs/model.md section it means."""
+    """A citation of the working notes (their spec file) points outside the repository: cite the
+    docs/model.md section it means."""
     for document in _markdown_files():
         for number, line in enumerate(document.read_text().splitlines(), 1):
             assert not re.search(r"\bSPEC\b", line), f"{document.relative_to(ROOT)}:{number}: {line.strip()}"

@@ -72,7 +72,16 @@ def test_run_json_prints_exactly_one_object_with_the_keys(fmu_paths, capsys):
     assert list(summary) == ["scenario", "controller", "step", "ts", "es1_pct", "es2_pct", "ITAE", "IAE",
                              "Ec", "umax", "tv_u", "wall_s", "us_per_step", "warnings"]
     assert summary["scenario"] == "pendulum_case1" and summary["controller"] == "fae"
-    assert summary["warnings"][0].startswith("es1_pct, es2_pct (stop < 2 pi")  # 0.2 s: no reference period
+    # issue 23, item 2: a score the run cannot give is null, with its reason, never a number
+    assert summary["ts"] is None and summary["es1_pct"] is None and summary["es2_pct"] is None  # 0.2 s
+    assert summary["warnings"] == [
+        "ts not settled: |e| is outside the 5 % band of max|ym| at the stop time 0.2 s, or enters it only at the "
+        "last step",
+        "es1_pct n/a: the horizon 0.2 s is shorter than the reference period, 2 pi s, over which es1 and es2 are taken",
+        "es2_pct n/a: the horizon 0.2 s is shorter than the reference period, 2 pi s, over which es1 and es2 are taken"]
+    assert cli_main(["run", "pendulum_case1", "--stop", "2", "--json"]) == 0
+    settled = json.loads(capsys.readouterr().out)
+    assert settled["ts"] == pytest.approx(0.735) and settled["es1_pct"] is None and len(settled["warnings"]) == 2
 
 
 def test_console_script_and_module_entry_point_run():
@@ -135,7 +144,8 @@ def test_divergence_keeps_the_partial_result_in_the_exception(fmu_paths):
      "unknown FMU 'NoSuchModel'; valid: AdaptiveFuzzyController, DcMotorArm, InvertedPendulum"),
     (lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "missing/Reference.fmu"'), "FMU file not found"),
     (lambda t: t.replace('from = "plant.y"', 'from = "plnt.y"'),
-     "unknown instance 'plnt'; valid: plant, reference, controller"),
+     "[[connections]] 1: from = 'plnt.y': unknown instance 'plnt' (did you mean 'plant'?); valid: plant, reference, "
+     "controller"),
     (lambda t: t.replace('from = "plant.y"', 'from = "plant.angle"'),
      "plant has no variable 'angle'; valid outputs: y, dy, d"),
     (lambda t: t.replace('to = "reference.y"', 'to = "reference.e"'),

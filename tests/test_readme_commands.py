@@ -18,6 +18,9 @@ generator's, tested by its own tests). How the blocks are run (keep to this when
 * A command's trailing comment is what the text promises, and is checked: ``exit N`` in it means
   the command must exit with status N (default 0); each "double-quoted text" in it must appear
   in the command's output (stdout and stderr).
+* A block run as written (no ``sub``, ``append`` or ``omit``) prints no warning the page does not
+  promise: an example whose output warns looks broken to a reader (issue 23). Make the example
+  clean, or say why in the text and promise the warning (``output:`` or a quoted comment).
 * An HTML comment right before the block's fence adjusts the run, one directive per line::
 
     <!-- test
@@ -353,6 +356,11 @@ def test_readme_block_runs_as_written(block, workspace, tmp_path):
         for promised in command.promised_outputs:
             assert promised in output, f"{where}: the page promises {promised!r}; output:\n{output}"
     output = "\n".join(everything)
+    if not (block.subs or block.appends or block.omits):
+        promised = [*block.outputs, *(p for c in commands for p in c.promised_outputs)]
+        unexplained = [line for line in output.splitlines() if re.match(r"(?i)\s*(\[)?warning\b", line)
+                       and not any(text in line for text in promised)]
+        assert not unexplained, f"{block.name} prints warnings the page does not explain:\n" + "\n".join(unexplained)
     for text in block.outputs:
         assert text in output, f"{block.name}: expected {text!r} in the output:\n{output}"
     for pattern in block.patterns:

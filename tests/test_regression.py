@@ -73,7 +73,9 @@ def test_every_reference_is_committed_small_and_described():
         meta = json.loads(json_path.read_text())
         assert meta["start"] == 0.0 and meta["stop"] == 20.0 and meta["points"] == regression.POINTS
         assert set(meta["tools"]) >= {"python", "fmpy", "pythonfmu", "numpy"} and meta["date"]
-        assert "git_commit" in meta and "step" in meta
+        assert "git_commit" in meta and "step" in meta and meta["wall_s"] > 0
+        assert meta["scenario_hash"] == regression.scenario_fingerprint(case)[0], \
+            f"{case.scenario}.toml changed since its references: run `python -m harness regress {case.scenario} --update`"
         reference = regression.read_reference(case)
         assert len(reference.time) == regression.POINTS and reference.time[-1] == 20.0
         assert all(np.all(np.isfinite(v)) for v in reference.signals.values())
@@ -128,7 +130,7 @@ def test_cli_exit_codes_and_hint(monkeypatch, tmp_path, capsys):
     monkeypatch.setattr(regression, "REFERENCE_DIR", tmp_path / "empty")
     assert cli_main(["regress", "pendulum_case1", "--controller", "vud", "--report", str(tmp_path)]) == 1
     captured = capsys.readouterr()
-    assert "regress --update" in captured.err and "FAIL" in captured.out
+    assert "regress pendulum_case1 --update" in captured.err and "FAIL" in captured.out
     assert cli_main(["regress", "pendulum_case9"]) == 2
 
 

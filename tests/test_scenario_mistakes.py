@@ -3,7 +3,11 @@
 Name mistakes already in tests/test_master.py are not repeated here."""
 from __future__ import annotations
 
+import zipfile
+
 import pytest
+
+import build_fmu
 
 from harness import scenario as scenarios
 from harness.cli import main as cli_main
@@ -21,28 +25,31 @@ def edited_scenario(tmp_path, edit):
 
 MISTAKES = [  # (what, edit, expected text); name mistakes already in test_master.py are not repeated
     ("unknown instance in a connection target", lambda t: t.replace('to = "plant.u"', 'to = "plnt.u"'),
-     "connection to 'plnt.u': unknown instance 'plnt'; valid: plant, reference, controller"),
+     "[[connections]] 7: to = 'plnt.u': unknown instance 'plnt' (did you mean 'plant'?); valid: plant, reference, controller"),
     ("unknown instance in the record", lambda t: t.replace('"reference.ym", "reference.dym"',
                                                              '"ref.ym", "reference.dym"'),
-     "record 'ref.ym': unknown instance 'ref'"),
+     "[record] variables: 'ref.ym': unknown instance 'ref'"),
     ("an input recorded as an output", lambda t: t.replace('variables = ["plant.y",', 'variables = ["plant.u", "plant.y",'),
-     "record 'plant.u' is an input, not an output; valid outputs of plant: y, dy, d"),
+     "[record] variables: 'plant.u' is an input, not an output; valid outputs of plant: y, dy, d"),
     ("an input set as a parameter", lambda t: t.replace("parameters = { mp = 0.1,", "parameters = { u = 1.0, mp = 0.1,"),
      "InvertedPendulum has no parameter 'u'"),
     ("an input connected twice", lambda t: t.replace('to = "reference.dy"', 'to = "reference.y"'),
      "input 'reference.y' is connected twice"),
     ("a scored signal that is not recorded", lambda t: t.replace('u = "controller.u"', 'u = "controller.alpha1"'),
-     "signal u = 'controller.alpha1' is not in record.variables"),
+     "[signals] u = 'controller.alpha1' is not in [record] variables"),
     ("a missing FMU file (absolute path)",
      lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "/nonexistent/TrackingReference.fmu"'),
      "FMU file not found: /nonexistent/TrackingReference.fmu"),
-    ("no [experiment] table", lambda t: t.replace("[experiment]", "[experimentz]"), "missing key 'experiment'"),
+    ("a misspelt table", lambda t: t.replace("[experiment]", "[experimentz]"),
+     "unknown key 'experimentz' at the top level (did you mean 'experiment'?)"),
+    ("a missing key", lambda t: t.replace("step = 0.0005", ""),
+     "edited.toml: [experiment] missing key 'step' (a finite number > 0: communication step (s))"),
     ("a TOML syntax error", lambda t: t.replace("[experiment]", "[experiment"), "is not valid TOML"),
     ("a parameter value that is not a number", lambda t: t.replace("lambda_ce = 0.99", 'lambda_ce = "0.99"'),
-     "components.controller: parameter lambda_ce = '0.99' is not a number"),
+     "[components.controller.parameters] lambda_ce = '0.99' is not a finite number"),
     ("a fractional value for an Integer parameter",
      lambda t: t.replace("parameters = { E1 =", "parameters = { fls_input = 1.5, E1 ="),
-     "components.controller: parameter fls_input = 1.5 is not an integer"),
+     "[components.controller.parameters] fls_input = 1.5 is not an integer"),
     ("an invalid parameter value (the FMU says why)", lambda t: t.replace("lambda_ce = 0.99", "lambda_ce = 1.0"),
      "parameter lambda_ce = 1.0 is invalid; valid range: (0, 1)"),
 ]
@@ -64,3 +71,39 @@ def test_a_bad_step_or_stop_on_the_command_line_is_one_clear_error(fmu_paths, ca
     err = capsys.readouterr().err
     assert err.count("error:") == 1 and "Traceback" not in err, err
     assert ("step" if option == "--step" else "stop") in err.split("error:")[1]
+
+
+# ------------------------------------------------------------ files that are not FMUs
+def _zip(path, members: dict):
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, text in members.items():
+            archive.writestr(name, text)
+
+
+BAD_FMU_FILES = [  # (what, make(path), the error's tail after "[components.reference] fmu = 'bad.fmu': <path>")
+    ("an empty file", lambda p: p.write_bytes(b""),
+     " is empty (0 bytes), not an FMU (an FMU is a zip archive holding modelDescription.xml)"),
+    ("a text file", lambda p: p.write_text("not an FMU\n"),
+     " is not an FMU: not a zip archive (11 bytes; an FMU is a zip archive holding modelDescription.xml)"),
+    ("a truncated FMU", lambda p: p.write_bytes((build_fmu.ROOT / "build/fmus/TrackingReference.fmu").read_bytes()[:3000]),
+     " is not an FMU: a truncated or damaged zip archive (3000 bytes; an FMU is a zip archive holding "
+     "modelDescription.xml)"),
+    ("a zip without a model description", lambda p: _zip(p, {"binaries/readme.txt": "x", "other.xml": "<a/>"}),
+     " is not an FMU: no modelDescription.xml in the zip archive (it holds binaries/readme.txt, other.xml)"),
+    ("a model description that is not XML", lambda p: _zip(p, {"modelDescription.xml": "not < xml"}),
+     ": its modelDescription.xml cannot be read: "),
+    ("a folder", lambda p: p.mkdir(), " is a folder, not an FMU file"),
+]
+
+
+@pytest.mark.parametrize("what,make,tail", BAD_FMU_FILES, ids=[case[0] for case in BAD_FMU_FILES])
+def test_a_file_that_is_not_an_fmu_is_named_with_what_it_is(fmu_paths, tmp_path, capsys, what, make, tail):
+    """Issue 23, item 3: these gave "File is not a zip file" or a raw KeyError."""
+    make(tmp_path / "bad.fmu")
+    path = edited_scenario(tmp_path, lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "bad.fmu"'))
+    assert cli_main(["run", str(path), "--stop", "0.01"]) == 2, what
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith(f"error: {path}: [components.reference] fmu = 'bad.fmu': {tmp_path / 'bad.fmu'}{tail}"), \
+        lines[0]

@@ -32,9 +32,29 @@ def test_settling_time_of_a_decaying_exponential():
 def test_settling_time_edge_cases():
     ym = np.sin(TIME)
     assert scores.settling_time(TIME, np.zeros_like(TIME), ym) == 0.0  # inside the band from the start
-    assert scores.settling_time(TIME, np.ones_like(TIME), ym) == T  # never settles
+    assert scores.settling_time(TIME, np.ones_like(TIME), ym) is None  # never settles: not the stop time
     late = np.where(TIME > 9.0, 1.0, 0.0)  # leaves the band again: the last exit counts
-    assert scores.settling_time(TIME, late, ym) == T
+    assert scores.settling_time(TIME, late, ym) is None
+    last_only = np.where(TIME < T, 1.0, 0.0)  # inside at the last sample only: no time it stays inside
+    assert scores.settling_time(TIME, last_only, ym) is None
+    two_last = np.where(TIME < TIME[-2], 1.0, 0.0)  # inside over the last step: settled there
+    assert scores.settling_time(TIME, two_last, ym) == TIME[-2]
+
+
+def test_whether_a_score_is_defined_is_decided_in_one_place():
+    """Issue 23, item 2: es1, es2 need one reference period; ts may be 'not settled'; never a number instead."""
+    assert scores.undefined_reason("es1_pct", 0.0, 2 * math.pi) is None
+    assert scores.undefined_reason("es2_pct", 0.0, 6.0) == (
+        "the horizon 6 s is shorter than the reference period, 2 pi s, over which es1 and es2 are taken")
+    assert all(scores.undefined_reason(m, 0.0, 0.3) is None for m in scores.SCORE_KEYS if m not in scores.PERIOD_SCORES)
+    short = np.linspace(0.0, 0.3, 301)
+    result = scores.score(short, np.ones_like(short), np.ones_like(short), np.sin(short), np.cos(short), short)
+    assert result["es1_pct"] is None and result["es2_pct"] is None and result["ts"] is None
+    assert all(isinstance(result[m], float) for m in ("ITAE", "IAE", "Ec", "umax", "tv_u"))
+    assert scores.why_none("ts", 0.0, 0.3) == ("|e| is outside the 5 % band of max|ym| at the stop time 0.3 s, or "
+                                               "enters it only at the last step")
+    assert [scores.value_text(m, result[m], 0.0, 0.3) for m in ("ts", "es1_pct", "Ec")] == [
+        "not settled", "n/a", format(result["Ec"], ".6g")]
 
 
 def test_control_energy_and_total_variation_of_a_sine():
@@ -55,7 +75,8 @@ def test_steady_state_errors_use_the_last_reference_period():
 
 
 def test_score_has_every_key():
-    e = np.exp(-TIME)
-    result = scores.score(TIME, e, -e, np.sin(TIME), np.cos(TIME), np.cos(TIME))
+    time = np.linspace(0.0, 20.0, 20_001)
+    e = np.exp(-time)
+    result = scores.score(time, e, -e, np.sin(time), np.cos(time), np.cos(time))
     assert tuple(result) == scores.SCORE_KEYS
     assert all(math.isfinite(v) for v in result.values())

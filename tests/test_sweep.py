@@ -50,7 +50,8 @@ def test_grid_syntax():
     (["plant.mass=0.1:1:2"], "InvertedPendulum has no parameter 'mass'; valid: gv, mc, mp"),
     (["plnt.mp=0.1:1:2"], "instance one of plant, reference, controller"),
     (["speed=1:2:2"], "instance one of plant, reference, controller, or one of step, stop"),
-    (["controller.kapa1=1:2:2"], "AdaptiveFuzzyController has no parameter 'kapa1'; valid: variant, fls_input"),
+    (["controller.kapa1=1:2:2"], "AdaptiveFuzzyController has no parameter 'kapa1' (did you mean 'kappa1'?); "
+                                 "valid: variant, fls_input"),
     (["controller.variant=1:3:3"], "--controller"),
     (["plant.mp=1:2:2", "plant.mp=3:4:2"], "two --grid options"),
     (["controller.fls_input=1,1.5"], "is an Integer; give whole numbers"),
@@ -97,8 +98,9 @@ def test_local_pool_sweep_records_every_point_with_scores_or_a_reason(fmu_paths,
     assert all(statuses[(c, m, "300.0")] == "ok" for c in ("vud", "fixed", "fae") for m in ("0.1", "1.0"))
     assert all(statuses[(c, "0.1", "300000.0")] == "diverged" for c in ("vud", "fixed", "fae"))
     for key, cells in rows.items():
-        if cells[-2] == "ok":
-            assert all(math.isfinite(float(v)) for v in cells[3:11]) and cells[-1] == ""
+        if cells[-2] == "ok":  # on 0.5 s: es1, es2 not defined, ts not settled (issue 23): empty, not numbers
+            assert all(math.isfinite(float(v)) for v in cells[6:11]) and cells[-1] == ""
+            assert cells[4:6] == ["", ""] and (cells[3] == "" or math.isfinite(float(cells[3])))
         else:
             assert cells[3:11] == [""] * 8 and "diverged" in cells[-1]
     # the same point through the run command's path gives the same ITAE, bit for bit

@@ -231,7 +231,8 @@ def load_tbb():
     try:
         files = importlib.metadata.distribution("tbb").files or []
     except importlib.metadata.PackageNotFoundError:
-        raise EngineUnavailable("Ecos needs the PyPI package 'tbb' (libtbb.so.12): pip install tbb") from None
+        raise EngineUnavailable("Ecos needs the PyPI package 'tbb' (libtbb.so.12), in the hosts extra: "
+                                "pip install -e '.[hosts]'") from None
     candidates = [f for f in files if Path(str(f)).name in ("libtbb.so.12", "tbb12.dll", "libtbb.12.dylib")]
     if not candidates:
         raise EngineUnavailable("the installed 'tbb' package holds no libtbb.so.12")
@@ -246,7 +247,7 @@ def import_ecospy():
     try:
         import ecospy  # here, not at module level: it loads only after load_tbb() (and is 0.2 s of import)
     except ImportError as error:
-        raise EngineUnavailable(f"cannot import ecospy ({error}): pip install ecospy tbb") from error
+        raise EngineUnavailable(f"Ecos needs ecospy, in the hosts extra: pip install -e '.[hosts]' ({error})") from error
     return ecospy
 
 

@@ -62,7 +62,8 @@ def run_libcosim(package_dir, stop: float, step: float, variables=(), record=())
         from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
         from libcosimpy.CosimObserver import CosimObserver
     except ImportError as error:  # pragma: no cover - depends on the machine
-        raise LibcosimUnavailable(f"cannot import libcosimpy ({error}): pip install libcosimpy") from error
+        raise LibcosimUnavailable(f"libcosim needs libcosimpy, in the hosts extra: pip install -e '.[hosts]' "
+                                  f"({error})") from error
     log_output_level(CosimLogLevel.WARNING)
     execution = CosimExecution.from_ssp_file(str(package_dir), step_size=None)
     steps = round(stop / step)

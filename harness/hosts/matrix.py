@@ -101,10 +101,17 @@ class Host:
     ssp_rtol: float | None = None  # the package is an --algorithm me one with this CVODE tolerance
     unavailable: Callable | None = None  # () -> why the host cannot run here, or None (instead of ``module``)
     edition: str | None = None  # "native": the native FMUs (FMI 2.0) whatever edition the matrix runs
+    max_steps: int | None = None  # the longest run it is given, in communication steps (its memory grows per step)
 
     @property
     def model_exchange(self) -> bool:
         return self.family == "me"
+
+    def horizon(self, stop: float, step: float) -> float:
+        """The stop time of its run: ``stop``, or the last whole step within ``max_steps``."""
+        if self.max_steps is None or stop <= self.max_steps * step:
+            return stop
+        return round(self.max_steps * step, 12)
 
 
 #: hosts that do not hand the FMU's log messages to us, and what we found
@@ -441,6 +448,10 @@ def run_container(scenario, fmu_paths, package=None, mode: str = "parallel") -> 
         "FMI logger callback of the container, which forwards the embedded FMUs' messages (fmpy)"
 
 
+#: OMSimulator keeps what it simulates in memory: 2.8 GB for the pendulum's 40 000 steps (measured, either
+#: API), so 20 s of the manipulator's 50 us steps would need some 28 GB: its runs stop after this many steps
+OMSIMULATOR_MAX_STEPS = 40_000
+
 # ------------------------------------------------------- the host registry
 #: one row per host: a new host is its run function above and its row here
 HOSTS = [
@@ -474,15 +485,15 @@ HOSTS = [
     Host("omsimulator-wc", "OMSimulator 3 (Python API)", "exported SSP; its co-simulation master, step set by hand "
          "(setFixedStepSize: this API reads no step annotation)", "feedthrough",
          functools.partial(run_omsimulator, api="python"), needs_ssp=True, unavailable=omsimulator.unavailable,
-         edition="native"),
+         edition="native", max_steps=OMSIMULATOR_MAX_STEPS),
     Host("omsimulator-wc-capi", "OMSimulator 3 (C API oms_importFile)", "exported SSP; its co-simulation master, "
          "step from the SSP's org.openmodelica annotation", "feedthrough",
          functools.partial(run_omsimulator, api="capi"), needs_ssp=True, unavailable=omsimulator.unavailable,
-         edition="native"),
+         edition="native", max_steps=OMSIMULATOR_MAX_STEPS),
     Host("omsimulator-sc", "OMSimulator 3 (Python API)", "export-ssp --algorithm me --rtol 1e-8: strongly coupled, "
          "its CVODE over the Model Exchange FMUs; native edition", "me",
          functools.partial(run_omsimulator, api="sc"), needs_ssp=True, ssp_rtol=1e-8,
-         unavailable=omsimulator.unavailable, edition="native"),
+         unavailable=omsimulator.unavailable, edition="native", max_steps=OMSIMULATOR_MAX_STEPS),
 ]
 HOSTS_BY_KEY = {h.key: h for h in HOSTS}
 
@@ -570,20 +581,24 @@ def hosts_matrix(names, controllers=(variants.PROPOSED,), host_keys=None, step_k
     began = clock.perf_counter()
     planned = plan(names, controllers, host_keys, step_kinds, convergence)
     try:
-        references = {(n, c): converged_values(n, c, stops.get(n), fmu_paths, convergence)
-                      for n in names for c in controllers}
+        references = {}
         tasks = []
         for key, name, controller, step, kind in planned:
             package = None
             host = HOSTS_BY_KEY[key]
+            full = stops.get(name) or scenarios.load(name).stop
+            stop = None if host.horizon(full, step) == full else host.horizon(full, step)
+            stop = stops.get(name) if stop is None else stop
+            if (name, controller, stop) not in references:
+                references[(name, controller, stop)] = converged_values(name, controller, stop, fmu_paths, convergence)
             paths = native_paths if host.edition == "native" else fmu_paths
             if host.needs_ssp:
                 kind = f"me{host.ssp_rtol:g}" if host.ssp_rtol else "cs"
-                package = folder / f"{name}_{controller}_{step:g}_{kind}_{host.edition or 'selected'}.ssp"
+                package = folder / f"{name}_{controller}_{step:g}_{stop}_{kind}_{host.edition or 'selected'}.ssp"
                 if not package.exists():
-                    export_ssp(scenarios.configure(name, controller, step, stops.get(name)), package,
+                    export_ssp(scenarios.configure(name, controller, step, stop), package,
                                fmu_paths=paths, rtol=host.ssp_rtol)
-            tasks.append((key, name, controller, step, stops.get(name), references[(name, controller)], paths,
+            tasks.append((key, name, controller, step, stop, references[(name, controller, stop)], paths,
                           package, kind))
         tasks.sort(key=lambda t: t[3])  # the finest steps (longest runs) first
         rows = parallel_map(host_row, tasks, jobs, description="host matrix", progress=None)
@@ -669,7 +684,7 @@ def matrix_markdown(matrix: dict) -> str:
              "*scenario* is the scenario's own step (Table I/II). Warnings are the FMU's log messages with status "
              "Warning, and where the host gives them to us.", "",
              "```bash",
-             "pip install -e '.[hosts]'      # libcosimpy and fmu-manipulation-toolbox (ecospy, fmpy: always)",
+             "pip install -e '.[hosts]'      # ecospy, tbb, libcosimpy, fmu-manipulation-toolbox (fmpy: always)",
              "python -m harness hosts pendulum_case1 manipulator --stop manipulator=5   # results/hosts/",
              "python -m harness hosts --host ecos libcosim-api --steps validated --apply  # also docs/hosts.md",
              "```", ""]
@@ -684,6 +699,9 @@ def matrix_markdown(matrix: dict) -> str:
         host = HOSTS_BY_KEY[row["host"]]
         limit = validated_step(convergence, row["scenario"], row["controller"], host.family)
         step = f"{row['step']:g} ({row['step_kind']})"
+        full = matrix["stops"].get(row["scenario"]) or scenarios.load(row["scenario"]).stop
+        if host.max_steps and row["stop"] is not None and row["stop"] < full - 1e-12:
+            step += f", over {row['stop']:g} s ({host.max_steps} steps: its memory)"
         if row["status"] != "ok":
             lines.append(f"| {row['scenario']} | {host.name} (`{host.key}`) | {host.settings} | {step} | "
                          f"{row['status']}: {row.get('reason', '')} |||||")

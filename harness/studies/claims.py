@@ -22,6 +22,12 @@ A claim over several scenarios is *reproduced* when every comparison is decided 
 its favour, *not reproduced* when at least one is clearly decided against it, and
 otherwise *not decided at this accuracy*.  ``undecided_cases`` names the runs a
 finer step could decide, for the claims whose verdict is still open.
+
+A comparison decided by a gap of less than ``CLOSE_MARGIN`` of the values (e.g. 0.02 %) is
+numerically sound but says *close*, and a claim that such comparisons decide says so beside its
+verdict.  A score a run cannot give (harness/scores.py: es1, es2 on a horizon shorter than one
+reference period, ts of a run that has not settled) decides nothing: the comparison is open,
+with the reason, and no finer step is asked for it.
 """
 from __future__ import annotations
 
@@ -29,6 +35,7 @@ import math
 from dataclasses import dataclass, field
 
 from .. import variants
+from ..scores import why_none
 
 REPRODUCED = "reproduced"
 NOT_REPRODUCED = "not reproduced"
@@ -42,6 +49,7 @@ DISTURBANCE_TOLERANCE = 0.10  # "barely changes": ITAE and IAE within 10 % of ca
 SMOOTHNESS_TOLERANCE = 1.10  # "smooth": tv_u at most 10 % above the smoothest comparison controller
 GRID_QUANTISED = ("ts",)  # scores read off the communication grid: error at least one step
 TOLERANCE_FACTOR = 10.0  # --algorithm me: the ladder's rungs are rtol and 10 rtol (no step to halve)
+CLOSE_MARGIN = 0.01  # a comparison decided by a gap under 1 % of the values is reported as close
 
 BELOW, ABOVE, OPEN = "below", "above", "open"
 
@@ -100,6 +108,23 @@ def estimate(ladder: list, metric: str) -> Estimate | None:
     return Estimate(float(finest[metric]), error, float(finest["step"]))
 
 
+def missing_reason(ladder: list, metric: str) -> str:
+    """Why a (scenario, controller) has no estimate of ``metric`` (:func:`estimate` gave None)."""
+    runs = sorted(ladder, key=lambda o: o["step"])
+    if not runs:
+        return "not run"
+    finest = runs[0]
+    if finest["status"] != "ok":
+        return f"run {finest['status']}"
+    return why_none(metric, finest.get("start", 0.0), finest.get("stop", math.nan))
+
+
+def relative_gap(low: Estimate, high: Estimate) -> float:
+    """|high - low| over the larger magnitude: how far apart two scores are, as a fraction."""
+    scale = max(abs(low.value), abs(high.value))
+    return abs(high.value - low.value) / scale if scale > 0 else 0.0
+
+
 def compare(low: Estimate, high: Estimate) -> tuple[str, float, float]:
     """(BELOW | ABOVE | OPEN, gap, combined error): is ``low`` clearly below ``high``?"""
     gap = high.value - low.value
@@ -126,45 +151,69 @@ class Claim:
     verdict: str
     details: list = field(default_factory=list)  # one line per scenario (or controller)
     open_cases: set = field(default_factory=set)  # (scenario, controller) a finer step could decide
+    close: list = field(default_factory=list)  # "scenario (metric vud vs other: 0.02 %)": decided by a small margin
 
 
 def _comparisons(name: str, metric: str, ladders: dict, factor: float = 1.0):
-    """vud's ``metric`` against ``factor`` x each comparison controller in one scenario."""
+    """vud's ``metric`` against ``factor`` x each comparison controller in one scenario:
+    (verdict, detail line, cases a finer step could decide, close comparisons that decide the verdict)."""
     estimates = {c: estimate(ladders.get((name, c), []), metric) for c in CONTROLLERS}
-    missing = [c for c, e in estimates.items() if e is None]
+    missing = {c: missing_reason(ladders.get((name, c), []), metric) for c, e in estimates.items() if e is None}
     if missing:
-        return UNDECIDED, f"{name}: no {metric} for {', '.join(missing)} (run failed)", set()
+        reasons = {}
+        for controller, reason in missing.items():
+            reasons.setdefault(reason, []).append(controller)
+        text = "; ".join(f"{', '.join(names)}: {reason}" for reason, names in reasons.items())
+        return UNDECIDED, f"{name}: no {metric} ({text})", set(), []
     vud = estimates[PROPOSED]
-    outcomes, parts, open_cases = [], [], set()
+    outcomes, parts, open_cases, close = [], [], set(), {}
     for other in variants.COMPARISONS:
         limit = estimates[other].scaled(factor)
         outcome, gap, combined = compare(vud, limit)
         outcomes.append(outcome)
-        relation = {BELOW: "clearly below", ABOVE: "clearly above", OPEN: "undecided"}[outcome]
+        margin = relative_gap(vud, limit)
+        is_close = outcome != OPEN and margin < CLOSE_MARGIN
+        relation = {BELOW: "below", ABOVE: "above", OPEN: "undecided"}[outcome]
+        if outcome != OPEN:
+            relation = f"just {relation} (close: by {100 * margin:.2g} %)" if is_close else f"clearly {relation}"
         scaled = f"{factor:g} x " if factor != 1.0 else ""
         parts.append(f"{scaled}{other} {limit.text()} (h = {estimates[other].step:g} s; {PROPOSED} {relation}: "
                      f"gap {abs(gap):.3g} {'>' if outcome != OPEN else '<='} error {combined:.3g})")
         if outcome == OPEN:
             open_cases |= {(name, PROPOSED), (name, other)}
+        if is_close:
+            close[outcome] = close.get(outcome, []) + [f"{name} ({metric}: {PROPOSED} vs {scaled}{other} by "
+                                                       f"{100 * margin:.2g} %)"]
     if all(o == BELOW for o in outcomes):
-        verdict = REPRODUCED
+        verdict, deciding = REPRODUCED, close.get(BELOW, [])
     elif any(o == ABOVE for o in outcomes):
-        verdict = NOT_REPRODUCED
+        verdict, deciding = NOT_REPRODUCED, close.get(ABOVE, [])
+        if len(deciding) < outcomes.count(ABOVE):  # a clear comparison decides it too
+            deciding = []
     else:
-        verdict = UNDECIDED
+        verdict, deciding = UNDECIDED, []
     line = f"{name}: {PROPOSED} {vud.text()} (h = {vud.step:g} s) vs " + ", ".join(parts) + f": {verdict}"
-    return verdict, line, open_cases
+    return verdict, line, open_cases, deciding
 
 
 def best_claim(label: str, metric: str, scenario_list, ladders: dict, factor: float = 1.0) -> Claim:
-    verdicts, details, open_cases = [], [], set()
+    verdicts, details, open_cases, close = [], [], set(), []
     for name in scenario_list:
-        verdict, line, cases = _comparisons(name, metric, ladders, factor)
+        verdict, line, cases, deciding = _comparisons(name, metric, ladders, factor)
         verdicts.append(verdict)
         details.append(line)
         open_cases |= cases
+        close.append((verdict, deciding))
     verdict = combine(verdicts)
-    return Claim(label, verdict, details, open_cases if verdict == UNDECIDED else set())
+    # close when every comparison that decides the verdict is close (not reproduced: those against it)
+    if verdict == REPRODUCED:
+        deciding = [d for _, found in close for d in found] if all(found for _, found in close) else []
+    elif verdict == NOT_REPRODUCED:
+        against = [found for v, found in close if v == NOT_REPRODUCED]
+        deciding = [d for found in against for d in found] if all(against) else []
+    else:
+        deciding = []
+    return Claim(label, verdict, details, open_cases if verdict == UNDECIDED else set(), deciding)
 
 
 def relative_change(two: Estimate, one: Estimate) -> tuple[float, float]:
@@ -247,9 +296,14 @@ def ladders_from_rows(rows: list) -> dict:
 
 
 def claims_markdown(claims: list) -> list:
-    """Report lines: one bullet per claim with its verdict, one sub-bullet per comparison."""
+    """Report lines: one bullet per claim with its verdict (and "close" when comparisons decided by
+    a margin under CLOSE_MARGIN decide it), one sub-bullet per comparison."""
     lines = []
     for claim in claims:
-        lines.append(f"- **{claim.verdict}**: {claim.label}.")
+        close = ""
+        if claim.close:
+            close = (f" (close: decided by a margin under {100 * CLOSE_MARGIN:g} % of the values, beyond the "
+                     f"numerical error: {'; '.join(claim.close)})")
+        lines.append(f"- **{claim.verdict}**: {claim.label}.{close}")
         lines += [f"  - {d}" for d in claim.details]
     return lines

@@ -22,6 +22,7 @@ which this same code produced) but the tests that check the math against the pap
 from __future__ import annotations
 
 import ast
+import importlib.util
 import os
 import re
 import shutil
@@ -321,6 +322,9 @@ def mutate_command(args) -> int:
             print(f"{mutation.name:32s} {mutation.path}:{mutation.function}  "
                   f"{'PATTERN NOT FOUND: ' + problem if problem else 'ok'}")
         return 2 if missing else 0
+    if importlib.util.find_spec("pytest") is None:  # each mutant is judged by the test suite
+        raise cli_args.UsageError("mutate runs the tests on every mutant: it needs pytest, in the test extra: "
+                                  "pip install -e '.[test]'")
     built = build_fmu.ensure_built()
     tests = tuple(args.tests) if args.tests else None
     started = clock.perf_counter()

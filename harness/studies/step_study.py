@@ -159,9 +159,9 @@ def halving_converged(levels: list) -> bool:
     return all(last[m] < CONVERGED_CHANGE or low <= previous[m] / last[m] <= high for m in METRICS)
 
 
-def richardson(fine: dict, coarse: dict) -> dict:
+def richardson(fine: dict, coarse: dict, metrics=METRICS) -> dict:
     """2 f(h/2) - f(h) for each metric: first-order error removed."""
-    return {m: 2.0 * fine[m] - coarse[m] for m in METRICS}
+    return {m: 2.0 * fine[m] - coarse[m] for m in metrics}
 
 
 def search_validated(within, start: float, finest: float, limit: float) -> tuple:

@@ -38,9 +38,9 @@ from pathlib import Path
 import build_fmu
 
 from .. import cli_args, variants
-from ..cases import STATUSES, one_line
+from ..cases import STATUSES, Progress, one_line
 from ..scenario import ScenarioError
-from ..scores import SCORE_KEYS
+from ..scores import SCORE_KEYS, undefined_reason
 from .sweep_csv import CSV_NAME, SETTINGS_NAME, CsvSink, check_settings, read_rows
 from .sweep_executors import DaskPool, LocalPool, point_task
 from .sweep_grid import SCENARIO_SETTINGS, SweepPlan, parse_grid, plan_sweep, point_key
@@ -90,8 +90,6 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
     sink = CsvSink(csv_path, plan.names, kept)
     wall_start = clock.perf_counter()
     interrupted, computed, pool, lost, lost_reason = False, 0, None, 0, ""
-    from tqdm import tqdm  # here, not at module level: 0.1-0.3 s of import that a CLI start without a sweep skips
-
     if todo:
         try:
             pool = (DaskPool(scheduler, plan) if scheduler else
@@ -99,8 +97,8 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
         except BaseException:
             sink.close()
             raise
-    bar = tqdm(total=len(wanted), initial=done_before, desc=f"sweep {plan.scenario.name}", unit="pt",
-               disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    bar = Progress(len(wanted), f"sweep {plan.scenario.name}", unit="pt", enabled=progress, initial=done_before,
+                   dynamic_ncols=True)  # a bar on a terminal, lines elsewhere
     previous_sigterm = _sigterm_as_interrupt()
     try:
         if todo:
@@ -174,9 +172,9 @@ def sweep_command(args) -> int:
         cli_args.check_assignments(plan.scenario, [(g.name, pick(g.values)) for g in parameters],
                                    plan_fmu_paths(plan), option="--grid")
     shortest = min(plan.grids[plan.names.index("stop")].values) if "stop" in plan.names else plan.scenario.stop
-    if shortest - plan.scenario.start < 2 * math.pi:
-        print(f"warning: stop {shortest:g} s < 2 pi: es1_pct and es2_pct (over the last reference period) "
-              "mean nothing in these rows", file=sys.stderr)
+    short = undefined_reason("es1_pct", plan.scenario.start, shortest)
+    if short is not None:
+        print(f"warning: es1_pct and es2_pct are empty in the rows with stop {shortest:g} s: {short}", file=sys.stderr)
     total = len(plan.points())
     fixed = ", ".join(f"{name} {getattr(plan.scenario, name):g} s" for name in SCENARIO_SETTINGS
                       if name not in plan.names)  # a grid axis has no single value
@@ -184,7 +182,7 @@ def sweep_command(args) -> int:
           f"{len(controllers)} controller{'s' if len(controllers) > 1 else ''} = {total} points"
           + (f", {fixed}" if fixed else "") + f" -> {out}", file=sys.stderr)
     summary = run_sweep(plan, out, jobs=args.jobs, scheduler=args.scheduler,
-                        progress=not args.no_progress and sys.stderr.isatty())
+                        progress=not args.no_progress)
     print(f"{summary.computed} points computed ({summary.executor}) in {summary.wall_s:.1f} s, "
           f"{summary.done_before} already done" + (", INTERRUPTED: run the same command to resume"
                                                      if summary.interrupted else ""))
@@ -248,5 +246,5 @@ def register(commands):
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="run the points on this dask.distributed scheduler (e.g. tcp://host:8786)")
     sweep.add_argument("--no-progress", action="store_true",
-                       help="no progress bar (there is none either when stderr is not a terminal)")
+                       help="no progress on stderr (a bar on a terminal, else a line per point at most every 5 s)")
     sweep.set_defaults(handler=sweep_command)

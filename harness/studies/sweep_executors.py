@@ -132,7 +132,7 @@ class DaskPool:
         try:
             from distributed import Client  # optional: the cluster extra; 1-3 s of import
         except ImportError:
-            raise ScenarioError("--scheduler needs dask.distributed: pip install 'afc-fmi[cluster]' "
+            raise ScenarioError("--scheduler needs dask.distributed, in the cluster extra: pip install -e '.[cluster]' "
                                 "(or pip install 'dask[distributed]')") from None
         try:
             self.client = Client(address, timeout=SCHEDULER_TIMEOUT)

@@ -25,7 +25,8 @@ from .. import scenario as scenarios
 from ..cases import Case, default_jobs, run_cases
 from ..me_master import ALGORITHM as MODEL_EXCHANGE
 from ..me_master import DEFAULT_RTOL
-from ..units import variable_unit, with_unit
+from ..scores import DEFINITIONS, SCORE_KEYS, SETTLING_BAND, undefined_reason, value_text, why_none
+from ..units import score_units, variable_unit, with_unit
 from . import claims as claims_module
 from .step_study import _fmt, convergence_summary, load_convergence, validated_step
 
@@ -36,6 +37,9 @@ ALL_SCENARIOS = (*PENDULUM, "manipulator")
 TABLE_COLUMNS = ("scenario", "controller", "ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec",
                  "umax", "tv_u", "step", "validated_step", "status")
 PAPER_METRICS = ("ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec")
+SHOWN_METRICS = (*PAPER_METRICS, "umax", "tv_u")  # the columns of the report's tables
+HEADINGS = {"ts": "ts", "es1_pct": "es1", "es2_pct": "es2", "ITAE": "ITAE", "IAE": "IAE", "Ec": "Ec", "umax": "umax",
+            "tv_u": "TV(u)/s"}
 BEYOND_PAPER = "motor_arm"  # a third-order plant of our own (docs/general_order.md)
 BEYOND_PAPER_SETS = (2, 3)  # fuzzy sets per input: M = 8 and 27 rules at order 3
 
@@ -55,18 +59,68 @@ def _csv_value(value):
     return "" if value is None else value
 
 
+def _columns(scenario: str) -> list:
+    """Column headings with units (the scenario's: N or N.m, rad or ...): ``ITAE (rad.s2)``."""
+    units = score_units(scenarios.load(scenario))
+    return [f"{HEADINGS[m]} ({units[m]})" for m in SHOWN_METRICS]
+
+
+def _cells(row: dict) -> list:
+    return [value_text(m, row[m], row["start"], row["stop"], ".4g") for m in SHOWN_METRICS]
+
+
 def paper_table(rows: list, scenario: str) -> str:
-    lines = ["| controller | ts (s) | es1 (%) | es2 (%) | ITAE | IAE | Ec | umax | TV(u)/s |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    """The scenario's rows: every score with its unit; n/a or not settled where the run gives none."""
+    columns = _columns(scenario)
+    lines = ["| controller | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
     for row in rows:
         if row["scenario"] != scenario:
             continue
         if row["status"] != "ok":
             lines.append(f"| {row['controller']} | {row['status']}: {row['reason']} |||||||| ")
             continue
-        lines.append("| " + " | ".join([row["controller"], *(_fmt(row[k]) for k in PAPER_METRICS),
-                                         _fmt(row["umax"]), _fmt(row["tv_u"])]) + " |")
+        lines.append("| " + " | ".join([row["controller"], *_cells(row)]) + " |")
     return "\n".join(lines)
+
+
+def table_notes(rows: list) -> list:
+    """One line per kind of missing score in ``rows`` (ok runs): what n/a and not settled mean there."""
+    notes = {}
+    for row in rows:
+        if row["status"] != "ok":
+            continue
+        for metric in SHOWN_METRICS:
+            if row[metric] is None:
+                text = value_text(metric, None, row["start"], row["stop"])
+                key = (text, why_none(metric, row["start"], row["stop"]))
+                notes.setdefault(key, {}).setdefault(HEADINGS[metric], []).append(row["controller"])
+    lines = []
+    for (text, reason), metrics in notes.items():
+        which = "; ".join(f"{metric} of {', '.join(dict.fromkeys(names))}" for metric, names in metrics.items())
+        lines.append(f"{text} ({which}): {reason}.")
+    return lines
+
+
+def step_note(rows: list, scenario: str) -> str:
+    """Where the table's values come from, beside the claims' values of the same scores."""
+    own = [row for row in rows if row["scenario"] == scenario]
+    steps = sorted({row["step"] for row in own})
+    step = ", ".join(f"{h:g}" for h in steps)
+    if any(row.get("algorithm") == MODEL_EXCHANGE for row in own):
+        tolerances = ", ".join(f"{rtol:g}" for rtol in sorted({row["rtol"] for row in own if row.get("rtol")}))
+        return (f"Model Exchange at rtol {tolerances}, on the output grid h = {step} s. The claims below read the "
+                "same scores at the tightest rtol run with their numerical error, so their values differ from "
+                "these in the digits that error covers.")
+    return (f"At the scenario's step h = {step} s. The claims below read the same scores at the finest step "
+            "run (h/2 or finer) with their numerical error, so their values differ from these in the digits "
+            "that error covers.")
+
+
+def table_block(rows: list, scenario: str) -> list:
+    """The table of one scenario with its step note and the notes of its missing scores."""
+    own = [row for row in rows if row["scenario"] == scenario]
+    return [paper_table(rows, scenario), "", step_note(rows, scenario), *(["", *table_notes(own)]
+                                                                         if table_notes(own) else []), ""]
 
 
 def beyond_paper_cases(stop=None, algorithm: str = "feedthrough", rtol: float | None = None) -> list:
@@ -77,16 +131,20 @@ def beyond_paper_cases(stop=None, algorithm: str = "feedthrough", rtol: float | 
 
 def beyond_paper_table(rows: list) -> str:
     """The third-order plant's scores (||e|| over e, de, d2e) per controller and number of sets."""
-    lines = ["| controller | sets m (rules) | ts (s) | es1 (%) | es2 (%) | ITAE | IAE | Ec | umax | TV(u)/s |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    columns = _columns(BEYOND_PAPER)
+    lines = ["| controller | sets m (rules) | " + " | ".join(columns) + " |", "|---" * (len(columns) + 2) + "|"]
     for row in rows:
         shape = f"{row['sets']} ({row['sets'] ** 3})"
         if row["status"] != "ok":
             lines.append(f"| {row['controller']} | {shape} | {row['status']}: {row['reason']} |||||||| ")
             continue
-        lines.append("| " + " | ".join([row["controller"], shape, *(_fmt(row[k]) for k in PAPER_METRICS),
-                                         _fmt(row["umax"]), _fmt(row["tv_u"])]) + " |")
+        lines.append("| " + " | ".join([row["controller"], shape, *_cells(row)]) + " |")
     return "\n".join(lines)
+
+
+def legend_label(controller: str) -> str:
+    """``vud: proposed AFC (variable universes)``: a figure's legend defines each controller."""
+    return next(f"{v.name}: {v.label}" for v in variants.VARIANTS if v.name == controller)
 
 
 def figures(rows: list, out: Path) -> list:
@@ -97,45 +155,58 @@ def figures(rows: list, out: Path) -> list:
     import matplotlib.pyplot as plt
 
     paths = []
-    order = {name: k for k, name in enumerate((*variants.COMPARISONS, variants.PROPOSED))}  # proposed on top
     for name in ALL_SCENARIOS:
-        runs = sorted((r for r in rows if r["scenario"] == name and "signals" in r),
-                      key=lambda r: order[r["controller"]])
+        runs = [r for r in rows if r["scenario"] == name and "signals" in r]
         if not runs:
             continue
-        fig, axes = plt.subplots(3, 2, figsize=(11, 9), sharex=True)
-        configured = scenarios.load(name)
-        unit = {dotted: variable_unit(configured, dotted) for dotted in
-                ("plant.y", "plant.dy", "reference.e", "reference.de", "controller.u")}
-        panels = [(with_unit("x1 and ym", unit["plant.y"]), "plant.y"),
-                  (with_unit("x2 and dym", unit["plant.dy"]), "plant.dy"),
-                  (with_unit("e", unit["reference.e"]), "reference.e"),
-                  (with_unit("de", unit["reference.de"]), "reference.de"),
-                  (with_unit("||e|| = sqrt(e^2 + de^2)", f"{unit['reference.e']}, {unit['reference.de']}"), None),
-                  (with_unit("u", unit["controller.u"]), "controller.u")]
-        for axis, (title, signal) in zip(axes.flat, panels):
-            for run in runs:
-                s = run["signals"]
-                values = np.hypot(s["reference.e"], s["reference.de"]) if signal is None else s[signal]
-                axis.plot(s["time"], values, color=variants.COLOURS[run["controller"]], lw=0.9, label=run["controller"])
-            if signal == "plant.y":
-                axis.plot(runs[0]["signals"]["time"], runs[0]["signals"]["reference.ym"], "k--", lw=0.8, label="ym")
-            if signal == "plant.dy":
-                axis.plot(runs[0]["signals"]["time"], runs[0]["signals"]["reference.dym"], "k--", lw=0.8,
-                          label="dym")
-            axis.set_title(title, fontsize=10)
-            axis.set_ylabel(title.split(" (")[-1].rstrip(")") if " (" in title else "", fontsize=8)
-            axis.grid(alpha=0.3)
-        axes[0, 0].legend(fontsize=8)
-        for axis in axes[-1]:
-            axis.set_xlabel("t (s)")
-        fig.suptitle(f"{name}: {scenarios.load(name).description}", fontsize=11)
-        fig.tight_layout()
+        fig = draw_figure(name, runs, plt)
         path = out / f"{name}.png"
         fig.savefig(path, dpi=90)
         plt.close(fig)
         paths.append(path)
     return paths
+
+
+def draw_figure(name: str, runs: list, plt):
+    """One scenario's figure: six panels, each controller in its colour with its definition in the legend,
+    the reference dashed, the 5 % band of ts drawn on e."""
+    order = {name: k for k, name in enumerate((*variants.COMPARISONS, variants.PROPOSED))}  # proposed on top
+    runs = sorted(runs, key=lambda r: order[r["controller"]])
+    fig, axes = plt.subplots(3, 2, figsize=(11, 9), sharex=True)
+    configured = scenarios.load(name)
+    unit = {dotted: variable_unit(configured, dotted) for dotted in
+            ("plant.y", "plant.dy", "reference.e", "reference.de", "controller.u")}
+    panels = [(with_unit("x1 and ym", unit["plant.y"]), "plant.y"),
+              (with_unit("x2 and dym", unit["plant.dy"]), "plant.dy"),
+              (with_unit("e", unit["reference.e"]), "reference.e"),
+              (with_unit("de", unit["reference.de"]), "reference.de"),
+              (with_unit("||e|| = sqrt(e^2 + de^2)", f"{unit['reference.e']}, {unit['reference.de']}"), None),
+              (with_unit("u", unit["controller.u"]), "controller.u")]
+    for axis, (title, signal) in zip(axes.flat, panels):
+        if signal == "reference.e":  # the band ts is read against
+            band = SETTLING_BAND * float(np.max(np.abs(runs[0]["signals"]["reference.ym"])))
+            axis.axhspan(-band, band, color="0.85", lw=0, label=f"{100 * SETTLING_BAND:g} % band of max|ym| (ts)")
+        for run in runs:
+            s = run["signals"]
+            values = np.hypot(s["reference.e"], s["reference.de"]) if signal is None else s[signal]
+            axis.plot(s["time"], values, color=variants.COLOURS[run["controller"]], lw=0.9,
+                      label=legend_label(run["controller"]))
+        if signal == "plant.y":
+            axis.plot(runs[0]["signals"]["time"], runs[0]["signals"]["reference.ym"], "k--", lw=0.8, label="ym")
+        if signal == "plant.dy":
+            axis.plot(runs[0]["signals"]["time"], runs[0]["signals"]["reference.dym"], "k--", lw=0.8,
+                      label="dym")
+        axis.set_title(title, fontsize=10)
+        axis.set_ylabel(title.split(" (")[-1].rstrip(")") if " (" in title else "", fontsize=8)
+        axis.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7)
+    handles, labels = axes[1, 0].get_legend_handles_labels()
+    axes[1, 0].legend(handles[:1], labels[:1], fontsize=7)  # the band
+    for axis in axes[-1]:
+        axis.set_xlabel("t (s)")
+    fig.suptitle(f"{name}: {configured.description}", fontsize=11)
+    fig.tight_layout()
+    return fig
 
 
 def choices_text() -> str:
@@ -161,32 +232,92 @@ CLAIMS_METHOD = (
     "case that an open claim needs at a further half (`--refine`). A score is its value at the finest "
     "step run, ± its numerical error: the change of that score over the last halving (the loop is "
     "first order in the step). A comparison is decided only when the gap exceeds the sum of both "
-    "errors; otherwise it is *not decided at this accuracy*. The tables above are at the scenario's step.")
+    "errors; otherwise it is *not decided at this accuracy*; one decided by a gap under "
+    f"{100 * claims_module.CLOSE_MARGIN:g} % of the values says *close*. The tables above are at the scenario's "
+    "step, so their digits differ from the values here where the numerical error reaches them.")
+PAPER_VALUES = (
+    "The paper's Tables I and II are not in the text of the paper we have (it holds their captions, "
+    "not their numbers), so these claims are checked against the paper's statements about the tables "
+    "(which controller is best in which score), not against its values.")
+
+
+def horizon(rows: list) -> tuple:
+    """(start, stop) of the runs (they share one horizon: the scenarios' 0-20 s or --stop)."""
+    starts = {row["start"] for row in rows} or {0.0}
+    stops = {row["stop"] for row in rows} or {math.nan}
+    return min(starts), max(stops)
+
+
+def horizon_text(rows: list, model_exchange: bool = False) -> str:
+    """The header's words on the horizon and on the scores it does not define (harness/scores.py decides)."""
+    start, stop = horizon(rows)
+    undefined = {}
+    for metric in SCORE_KEYS:
+        reason = undefined_reason(metric, start, stop)
+        if reason is not None:
+            undefined.setdefault(reason, []).append(HEADINGS[metric])
+    text = (f"from {start:g} to {stop:g} s, recorded and scored on the scenario's step as output grid."
+            if model_exchange else f"from {start:g} to {stop:g} s at the scenario's communication step.")
+    for reason, names in undefined.items():
+        text += (f" On this horizon {' and '.join(names)} are not defined ({reason}): the tables show n/a and "
+                 "the claims on them are not decided.")
+    return text
+
+
+def reading_guide(rows: list) -> list:
+    """What the report's names mean: the controllers, the scores with their units, n/a, not settled."""
+    lines = ["## How to read this report", "", "The controllers (the `variant` parameter of the controller FMU; "
+             "docs/model.md section 6):", ""]
+    lines += [f"- `{v.name}` (variant {v.code}): {v.label}" for v in variants.VARIANTS]
+    units = {name: score_units(scenarios.load(name)) for name in ALL_SCENARIOS}
+    lines += ["", "The scores (docs/model.md section 9) [unit]:", ""]
+    for metric in SHOWN_METRICS:
+        unit = units["pendulum_case1"][metric]
+        other = units["manipulator"][metric]
+        unit_text = unit if unit == other else f"{unit} on the pendulum, {other} on the manipulator"
+        lines.append(f"- {HEADINGS[metric]} [{unit_text}]: {DEFINITIONS[metric]}")
+    lines += ["", "*n/a*: the score is not defined on the run's horizon; *not settled*: |e| did not stay inside the "
+              f"{100 * SETTLING_BAND:g} % band up to the stop time (ts is then no number, not the stop time).", ""]
+    return lines
+
+
+def figure_caption(number: int, path: Path, rows: list) -> str:
+    name = path.stem
+    steps = ", ".join(f"{h:g}" for h in sorted({r["step"] for r in rows if r["scenario"] == name}))
+    controllers = "; ".join(legend_label(c) for c in CONTROLLERS)
+    return (f"*Figure {number}: {name}, {scenarios.load(name).description}; every controller at the scenario's "
+            f"step h = {steps} s, signals drawn every 0.01 s. Left column: x1 with ym (dashed), the tracking "
+            "error e, the error norm ||e||; right column: x2 with dym (dashed), de, the control input u. "
+            f"Controllers: {controllers}. Grey band on e: ±{100 * SETTLING_BAND:g} % of max|ym|, the band of the "
+            "settling time ts.*")
 
 
 def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: list, wall_s: float, jobs: int,
                     peak_mib: float = float("nan"), beyond_rows=(), rtol: float | None = None) -> str:
-    how = ("one FMI co-simulation (controller, plant and reference FMUs coupled by the feedthrough-aware master) "
-           "from 0 to 20 s at the scenario's communication step" if rtol is None else
+    how = ("one FMI co-simulation (controller, plant and reference FMUs coupled by the feedthrough-aware master)"
+           if rtol is None else
            f"one Model Exchange run (the native FMUs integrated together by CVODE, rtol {rtol:g}, "
-           "harness/me_master.py: no communication step) from 0 to 20 s, recorded and scored on the scenario's "
-           "step as output grid")
+           "harness/me_master.py: no communication step)")
     parts = ["# Table I / Table II: co-simulation report", "",
              f"Generated by `python -m harness tables` in {wall_s:.1f} s wall (with the claims' step ladders) "
              f"on {jobs} processes "
              f"(peak memory of the largest process {peak_mib:.0f} MiB). "
-             f"Each row is {how}.", ""]
+             f"Each row is {how} {horizon_text(rows, model_exchange=rtol is not None)}", ""]
+    parts += reading_guide(rows)
     parts += ["## Table I: inverted pendulum", ""]
     for name in PENDULUM:
-        parts += [f"### {name}: {scenarios.load(name).description}", "", paper_table(rows, name), ""]
-    parts += ["## Table II: single-link manipulator with friction", "", paper_table(rows, "manipulator"), ""]
+        parts += [f"### {name}: {scenarios.load(name).description}", "", *table_block(rows, name)]
+    parts += ["## Table II: single-link manipulator with friction", "", *table_block(rows, "manipulator")]
     if beyond_rows:
         beyond = scenarios.load(BEYOND_PAPER)
         parts += ["## Beyond the paper: a third-order plant", "",
                   f"{beyond.description}; the controller at order n = 3 (inputs e, de, d2e; ||e|| over all "
                   f"three) with m = 2 and 3 fuzzy sets per input, step {beyond.step:g} s "
                   "(converged by halving, docs/general_order.md).", "", beyond_paper_table(beyond_rows), ""]
-    parts += ["## Claims of the paper, checked", "", CLAIMS_METHOD if rtol is None else CLAIMS_METHOD_ME, ""]
+        notes = table_notes(list(beyond_rows))
+        parts += [*notes, ""] if notes else []
+    parts += ["## Claims of the paper, checked", "", PAPER_VALUES, "", CLAIMS_METHOD if rtol is None else CLAIMS_METHOD_ME,
+              ""]
     parts += claims_module.claims_markdown(claims)
     parts += ["", "## Choices the numbers depend on", "", choices_text(), ""]
     parts += ["## Communication step (validated step, 1 %)", ""]
@@ -197,7 +328,8 @@ def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: l
         parts += ["No step-size study found: run `python -m harness convergence`.", ""]
     if figure_paths:
         parts += ["## Figures (like the paper's Figs. 4-8)", ""]
-        parts += [f"![{p.stem}]({p.name})" for p in figure_paths]
+        for number, path in enumerate(figure_paths, 1):
+            parts += [f"![{path.stem}]({path.name})", "", figure_caption(number, path, rows), ""]
     return "\n".join(parts) + "\n"
 
 
@@ -285,11 +417,15 @@ def tables_command(args) -> int:
     convergence = load_convergence()
     for row in rows:  # the validated step is a co-simulation's: Model Exchange has none
         row["validated_step"] = None if me else validated_step(convergence, row["scenario"], row["controller"])
-    if args.stop is not None and args.stop < 2 * math.pi:  # es1, es2: over the last reference period
-        print(f"warning: --stop {args.stop:g} < 2 pi: es1 and es2 (taken over the last reference period) "
-              "are left out as n/a", file=sys.stderr)
-        for row in rows:
-            row["es1_pct"] = row["es2_pct"] = None
+    start, stop = horizon(rows)
+    undefined = {}  # e.g. es1, es2 on a --stop shorter than one reference period
+    for metric in SCORE_KEYS:
+        reason = undefined_reason(metric, start, stop)
+        if reason is not None:
+            undefined.setdefault(reason, []).append(HEADINGS[metric])
+    for reason, names in undefined.items():
+        print(f"note: {' and '.join(names)} are n/a in every table and their claims are not decided: {reason}",
+              file=sys.stderr)
     write_table(out / "table1.csv", [r for r in rows if r["scenario"] in PENDULUM])
     write_table(out / "table2.csv", [r for r in rows if r["scenario"] == "manipulator"])
     write_table(out / "table3_beyond_paper.csv", beyond_rows,

@@ -1,0 +1,344 @@
+"""The regression's outputs: report.md, report.html with the plots of failing signals, JUnit XML.
+
+Written by ``python -m harness regress`` (harness/studies/regression.py) from its comparisons:
+
+* ``report.md``: the summary table and every signal (pass/fail, largest excursion and where);
+* ``report.html``: a static page (no server, no script: it opens from a CI artifact) with the
+  failing signals first, each with its plot (reference, tube, new result, the largest excursion
+  marked), then the passing ones; every link and image is a file beside it;
+* JUnit XML (``--junit FILE``): one test case per scenario x controller, a failure naming the
+  signal, its largest excursion and its time, the report's path in the case's output, the wall
+  time of the run and of the reference's run (and a flag when the run is more than
+  ``SLOW_FACTOR`` times slower), as GitHub Actions, GitLab CI and Jenkins read it.
+
+This module reads the comparisons' attributes only; it imports no other study.
+"""
+from __future__ import annotations
+
+import datetime
+import html
+import platform
+import re
+import xml.etree.ElementTree as ElementTree
+from pathlib import Path
+
+import numpy as np
+
+from .. import scenario as scenarios
+from ..units import variable_unit, with_unit
+
+SLOW_FACTOR = 2.0  # a case whose run takes more than this times its reference's run is flagged
+SUMMARY_HEADER = ["case", "result", "signals in tube", "worst signal", "max outside tube", "at t [s]",
+                  "max abs deviation", "run [s]", "reference run [s]", "notes"]
+
+
+def slug(text: str) -> str:
+    """A file and anchor name from a case label and a signal (letters, digits, '.', '_', '-')."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_")
+
+
+def plot_name(comparison, signal) -> str:
+    return f"{slug(comparison.case.label)}_{signal.signal}.png"
+
+
+def _format_tolerances(tolerances: dict) -> str:
+    return ", ".join(f"{key} = {value:g}" for key, value in tolerances.items())
+
+
+def slowness(comparison) -> str:
+    """'' or 'N.Nx slower than the reference run' when the run took more than SLOW_FACTOR times as long."""
+    ratio = comparison.slowdown
+    return f"{ratio:.1f}x slower than the reference run" if ratio is not None and ratio > SLOW_FACTOR else ""
+
+
+# ------------------------------------------------------------------ plots
+def plot_signal(path: Path, case, comparison, reference, run):
+    """Reference, tube and new result over the whole horizon, a zoom around the worst point, and the
+    excursion outside the tube; the largest excursion is marked on all three."""
+    import matplotlib  # here, not at module level: 1-3 s of import, paid only when a failing signal is drawn
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    name = comparison.signal
+    unit = variable_unit(scenarios.load(case.scenario), name)
+    funnel = comparison.funnel or {}
+    figure, (whole, zoom, excursion) = plt.subplots(3, 1, figsize=(9, 8), gridspec_kw={"height_ratios": [3, 3, 1.3]})
+    worst = comparison.t_max_error
+    for axis in (whole, zoom):
+        if "lowerBound" in funnel:
+            lower, upper = funnel["lowerBound"], funnel["upperBound"]
+            grid = np.union1d(lower[:, 0], upper[:, 0])
+            axis.fill_between(grid, np.interp(grid, lower[:, 0], lower[:, 1]), np.interp(grid, upper[:, 0], upper[:, 1]),
+                              color="tab:gray", alpha=0.35, lw=0, label="tube")
+        axis.plot(reference.time, reference.signals[name], color="k", lw=0.9, label="reference")
+        axis.plot(run.time, run.signals[name], color="tab:red", lw=0.9, label="new result")
+        if worst is not None and np.isfinite(worst):
+            value = float(np.interp(worst, run.time, run.signals[name]))
+            if np.isfinite(value):
+                axis.plot([worst], [value], "o", ms=9, mfc="none", mec="tab:blue", mew=1.5,
+                          label=f"largest excursion (t = {worst:.4g} s)")
+        axis.set_ylabel(with_unit(name, unit))
+    centre = worst if worst is not None else float(reference.time[-1]) / 2
+    half = 0.02 * float(reference.time[-1] - reference.time[0]) + 1e-9
+    inside = (reference.time >= centre - half) & (reference.time <= centre + half)
+    if inside.any():
+        values = np.concatenate([reference.signals[name][inside], run.signals[name][inside]])
+        values = values[np.isfinite(values)]
+        if values.size:
+            margin = 0.2 * (values.max() - values.min()) + 1e-12
+            zoom.set_ylim(values.min() - margin, values.max() + margin)
+    zoom.set_xlim(centre - half, centre + half)
+    zoom.set_title(f"zoom around t = {centre:.4g} s", fontsize=8)
+    whole.set_title(f"{case.label}: {name} ({comparison.message or 'inside the tube'})", fontsize=9)
+    whole.legend(fontsize=8, loc="best")
+    if "errors" in funnel:
+        excursion.plot(funnel["errors"][:, 0], funnel["errors"][:, 1], color="tab:red", lw=0.8)
+        if worst is not None:
+            excursion.axvline(worst, color="tab:blue", lw=0.8, ls="--")
+    excursion.set_ylabel(with_unit("outside tube", unit))
+    excursion.set_xlabel("time (s)")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def draw_failing_signals(comparisons, runs, references, directory: Path):
+    """A PNG for every failing signal that has a reference (old PNGs removed); sets ``signal.plot``."""
+    for old in directory.glob("*.png"):
+        old.unlink()
+    for comparison, run, reference in zip(comparisons, runs, references):
+        for signal in comparison.signals:
+            if not signal.passed and reference is not None and signal.signal in reference.signals:
+                path = directory / plot_name(comparison, signal)
+                plot_signal(path, comparison.case, signal, reference, run)
+                signal.plot = path
+
+
+# --------------------------------------------------------------- markdown
+def _table(rows, header) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+    return lines
+
+
+def worst_signal(comparison):
+    return max(comparison.signals, key=lambda s: (s.max_error, s.max_deviation), default=None)
+
+
+def summary_rows(comparisons) -> list:
+    rows = []
+    for comparison in comparisons:
+        failed = [s for s in comparison.signals if not s.passed]
+        worst = worst_signal(comparison)
+        notes = [comparison.message or ", ".join(s.signal for s in failed), slowness(comparison), *comparison.notes]
+        rows.append([comparison.case.label, "pass" if comparison.passed else "**FAIL**",
+                     f"{len(comparison.signals) - len(failed)}/{len(comparison.signals)}",
+                     worst.signal if worst else "-",
+                     f"{worst.max_error:.3g}" if worst else "-",
+                     f"{worst.t_max_error:.4g}" if worst and worst.t_max_error is not None else "-",
+                     f"{worst.max_deviation:.3g}" if worst else "-",
+                     f"{comparison.wall_s:.2f}",
+                     f"{comparison.reference_wall_s:.2f}" if comparison.reference_wall_s else "-",
+                     "; ".join(note for note in notes if note)])
+    return rows
+
+
+def _header_lines(comparisons, reference_dir, tolerances: dict, points: int) -> tuple:
+    passed = sum(c.passed for c in comparisons)
+    title = f"Regression report ({passed}/{len(comparisons)} cases pass)"
+    generated = (f"Generated {datetime.datetime.now().replace(microsecond=0).isoformat()} by "
+                 f"`python -m harness regress` on {platform.node() or 'this machine'}; references in "
+                 f"`{reference_dir}`.")
+    tolerance = (f"Tolerances (pyfunnel): {_format_tolerances(tolerances)}, unless a reference's metadata sets its "
+                 f"own (per case or per signal: listed with the signal); signals resampled to {points} points "
+                 f"over each scenario's horizon. A run more than {SLOW_FACTOR:g}x slower than its reference's "
+                 "run is flagged.")
+    return title, generated, tolerance
+
+
+def write_markdown(comparisons, path: Path, reference_dir, tolerances: dict, points: int) -> Path:
+    title, generated, tolerance = _header_lines(comparisons, reference_dir, tolerances, points)
+    lines = [f"# {title}", "", generated, "", tolerance, "", "Also as a web page: [report.html](report.html).", "",
+             "## Summary", ""]
+    lines += _table(summary_rows(comparisons), SUMMARY_HEADER)
+    lines += ["", "## Signals", ""]
+    rows = []
+    for comparison in comparisons:
+        for s in comparison.signals:
+            plot = f"![]({s.plot.name})" if s.plot else ""
+            rows.append([comparison.case.label, s.signal, "pass" if s.passed else "**FAIL**", f"{s.max_error:.3g}",
+                         f"{s.t_max_error:.4g}" if s.t_max_error is not None else "-", f"{s.max_deviation:.3g}",
+                         f"{s.t_max_deviation:.4g}" if s.t_max_deviation is not None else "-",
+                         _own_tolerances(comparison, s), s.message, plot])
+    lines += _table(rows, ["case", "signal", "result", "max outside tube", "at t [s]", "max abs deviation",
+                           "at t [s]", "own tolerances", "message", "plot"])
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _own_tolerances(comparison, signal) -> str:
+    """The signal's tolerances where they differ from the report's (set in its reference's metadata)."""
+    own = {key: value for key, value in signal.tolerances.items() if comparison.run_tolerances.get(key) != value}
+    return _format_tolerances(own)
+
+
+# ------------------------------------------------------------------- HTML
+STYLE = """
+body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 72em; padding: 0 1em; color: #222; }
+table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.9em; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.5em; text-align: left; vertical-align: top; }
+th { background: #f2f2f2; }
+.fail { color: #b00020; font-weight: bold; }
+.pass { color: #1b5e20; }
+.slow { color: #8a4b00; font-weight: bold; }
+section.failure { border-left: 4px solid #b00020; padding-left: 1em; margin-bottom: 2em; }
+img { max-width: 100%; height: auto; border: 1px solid #ddd; }
+figcaption { font-size: 0.85em; color: #555; }
+"""
+
+
+def _inline(text: str) -> str:
+    """Escaped text with `code` spans as <code>."""
+    return re.sub(r"`([^`]+)`", r"<code>\1</code>", html.escape(text))
+
+
+def _cell(text, css: str = "") -> str:
+    attribute = f' class="{css}"' if css else ""
+    return f"<td{attribute}>{html.escape(str(text))}</td>"
+
+
+def _html_table(header, rows) -> list:
+    lines = ["<table>", "<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header) + "</tr>"]
+    lines += ["<tr>" + "".join(row) + "</tr>" for row in rows]
+    return lines + ["</table>"]
+
+
+def anchor(comparison, signal=None) -> str:
+    return "case-" + slug(comparison.case.label) + (f"--{slug(signal.signal)}" if signal is not None else "")
+
+
+def write_html(comparisons, path: Path, reference_dir, tolerances: dict, points: int) -> Path:
+    """report.html: the summary, the failing signals with their plots, then the passing signals."""
+    title, generated, tolerance = _header_lines(comparisons, reference_dir, tolerances, points)
+    lines = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
+             '<meta name="viewport" content="width=device-width, initial-scale=1">',
+             f"<title>{html.escape(title)}</title>", f"<style>{STYLE}</style>", "</head>", "<body>",
+             f"<h1>{html.escape(title)}</h1>",
+             f"<p>{_inline(generated)} {_inline(tolerance)} The same as Markdown: "
+             '<a href="report.md">report.md</a>.</p>',
+             '<h2 id="cases">Cases</h2>']
+    rows = []
+    for comparison, row in zip(comparisons, summary_rows(comparisons)):
+        failing = [s for s in comparison.signals if not s.passed]
+        target = anchor(comparison, failing[0]) if failing else anchor(comparison) if not comparison.passed else ""
+        label = (f'<td><a href="#{target}">{html.escape(comparison.case.label)}</a></td>' if target
+                 else _cell(comparison.case.label))
+        cells = [label, _cell("pass" if comparison.passed else "FAIL", "pass" if comparison.passed else "fail")]
+        cells += [_cell(value) for value in row[2:9]]
+        cells.append(_cell(row[9], "slow" if slowness(comparison) else ""))
+        rows.append(cells)
+    lines += _html_table(SUMMARY_HEADER, rows)
+
+    failures = [(c, s) for c in comparisons for s in c.signals if not s.passed]
+    case_failures = [c for c in comparisons if c.message]
+    lines.append(f'<h2 id="failures">Failing ({len(failures)} signals, {len(case_failures)} cases with a failure '
+                 "of their own)</h2>")
+    if not failures and not case_failures:
+        lines.append("<p>None: every signal of every case lies inside its tube.</p>")
+    for comparison in case_failures:
+        lines += [f'<section class="failure" id="{anchor(comparison)}">',
+                  f"<h3>{html.escape(comparison.case.label)}</h3>",
+                  f'<p class="fail">{html.escape(comparison.message)}</p>', "</section>"]
+    for comparison, signal in failures:
+        lines += [f'<section class="failure" id="{anchor(comparison, signal)}">',
+                  f"<h3>{html.escape(comparison.case.label)}: {html.escape(signal.signal)}</h3>",
+                  f'<p class="fail">{html.escape(signal.message)}</p>']
+        lines += _html_table(["max outside tube", "at t [s]", "max abs deviation", "at t [s]", "tolerances"], [[
+            _cell(f"{signal.max_error:.3g}"),
+            _cell(f"{signal.t_max_error:.6g}" if signal.t_max_error is not None else "-"),
+            _cell(f"{signal.max_deviation:.3g}"),
+            _cell(f"{signal.t_max_deviation:.6g}" if signal.t_max_deviation is not None else "-"),
+            _cell(_format_tolerances(signal.tolerances))]])
+        if signal.plot is not None:
+            alt = f"{comparison.case.label}: {signal.signal}, reference, tube and new result"
+            lines += ["<figure>", f'<img src="{html.escape(signal.plot.name)}" alt="{html.escape(alt)}">',
+                      "<figcaption>Reference (black), tube (grey), new result (red), the largest excursion "
+                      "circled; middle: a zoom around it; bottom: how far the result lies outside the tube."
+                      "</figcaption>", "</figure>"]
+        else:
+            lines.append("<p>No plot: the signal is missing from the reference or the run.</p>")
+        lines.append("</section>")
+
+    passing = [(c, s) for c in comparisons for s in c.signals if s.passed]
+    lines.append(f'<h2 id="passing">Passing signals ({len(passing)})</h2>')
+    rows = [[_cell(c.case.label), _cell(s.signal), _cell(f"{s.max_deviation:.3g}"),
+             _cell(f"{s.t_max_deviation:.6g}" if s.t_max_deviation is not None else "-"),
+             _cell(_own_tolerances(c, s))] for c, s in passing]
+    lines += _html_table(["case", "signal", "max abs deviation", "at t [s]", "own tolerances"], rows)
+    lines += ["</body>", "</html>"]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+# ------------------------------------------------------------------ JUnit
+def failure_text(comparison) -> tuple[str, str]:
+    """(message, details) of a failing case: the first failing signal named, with its largest excursion."""
+    failing = [s for s in comparison.signals if not s.passed]
+    details = []
+    if comparison.message:
+        details.append(comparison.message)
+    for signal in failing:
+        details.append(f"{signal.signal}: {signal.message} (largest |new - reference| {signal.max_deviation:.3g}"
+                       + (f" at t = {signal.t_max_deviation:.6g} s)" if signal.t_max_deviation is not None else ")"))
+    if failing:
+        first = failing[0]
+        message = f"{first.signal}: {first.message}"
+        if len(failing) > 1:
+            message += f" (and {len(failing) - 1} more: {', '.join(s.signal for s in failing[1:])})"
+        if comparison.message:
+            message = f"{comparison.message}; {message}"
+    else:
+        message = comparison.message
+    return message, "\n".join(details)
+
+
+def write_junit(comparisons, path: Path, report: Path | None, suite: str = "afc-fmi regress") -> Path:
+    """JUnit XML: one test case per scenario x controller; failures name the signal, excursion and time."""
+    failures = sum(not c.passed for c in comparisons)
+    total_time = sum(c.wall_s for c in comparisons)
+    stamp = datetime.datetime.now().replace(microsecond=0).isoformat()
+    root = ElementTree.Element("testsuites", name=suite, tests=str(len(comparisons)), failures=str(failures),
+                               errors="0", time=f"{total_time:.3f}")
+    testsuite = ElementTree.SubElement(root, "testsuite", name=suite, tests=str(len(comparisons)),
+                                       failures=str(failures), errors="0", skipped="0", time=f"{total_time:.3f}",
+                                       timestamp=stamp, hostname=platform.node() or "localhost")
+    if report is not None:
+        properties = ElementTree.SubElement(testsuite, "properties")
+        ElementTree.SubElement(properties, "property", name="report", value=str(report))
+    for comparison in comparisons:
+        case = comparison.case
+        testcase = ElementTree.SubElement(testsuite, "testcase", classname=f"regress.{case.scenario_name}",
+                                          name=case.label, time=f"{comparison.wall_s:.3f}")
+        properties = ElementTree.SubElement(testcase, "properties")
+        ElementTree.SubElement(properties, "property", name="wall_s", value=f"{comparison.wall_s:.3f}")
+        if comparison.reference_wall_s:
+            ElementTree.SubElement(properties, "property", name="reference_wall_s",
+                                   value=f"{comparison.reference_wall_s:.3f}")
+        if slowness(comparison):
+            ElementTree.SubElement(properties, "property", name="slow", value=slowness(comparison))
+        if not comparison.passed:
+            message, details = failure_text(comparison)
+            failure = ElementTree.SubElement(testcase, "failure", message=message, type="RegressionFailure")
+            failure.text = details
+        output = [f"report: {report}" if report is not None else "report: not written (no --report)",
+                  f"run {comparison.wall_s:.2f} s"
+                  + (f", reference run {comparison.reference_wall_s:.2f} s" if comparison.reference_wall_s else "")
+                  + (f" ({slowness(comparison)})" if slowness(comparison) else "")]
+        output += comparison.notes
+        ElementTree.SubElement(testcase, "system-out").text = "\n".join(output)
+    ElementTree.indent(root)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ElementTree.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+    return path

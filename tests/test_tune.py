@@ -1,0 +1,412 @@
+"""`python -m harness tune` (issue 25, docs/tuning.md): search space, pruning, database, results.
+
+Short horizons and few trials: the whole file stays within about a minute.
+"""
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import random
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+optuna = pytest.importorskip("optuna")
+
+import build_fmu  # noqa: E402
+import fmu_catalog  # noqa: E402
+from harness import scenario as scenarios  # noqa: E402
+from harness import variants  # noqa: E402
+from harness.cli import main as cli_main  # noqa: E402
+from harness.studies import tune  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+CONTROLLER = "AdaptiveFuzzyController"
+
+
+@pytest.fixture(scope="module")
+def edition():
+    import build_native
+
+    return "native" if build_native.compiler_available() else "python"
+
+
+@pytest.fixture(scope="module")
+def paths(edition):
+    return build_fmu.ensure_built(edition=edition)
+
+
+def config(tmp_path, paths, edition, **changes):
+    base = dict(scenario="pendulum_case1", controller="vud", trials=4, stop=0.3, jobs=1, edition=edition,
+                out=tmp_path, fmu_paths=paths, held_out=())
+    base.update(changes)
+    return tune.TuneConfig(**base)
+
+
+def trials_of(url, name):
+    study = optuna.load_study(study_name=name, storage=url)
+    return study.get_trials(deepcopy=False)
+
+
+# ------------------------------------------------------------------ search space
+def test_the_search_space_is_the_fmus_table_per_variant_and_order():
+    names = {(c, n): [d.name for d in tune.search_space(v, n)]
+             for c, v in variants.CONTROLLER_VARIANTS.items() for n in (2, 3)}
+    assert names[("vud", 2)] == ["k1", "k2", "q1", "q2", "gamma", "m_theta", "delta", "lambda_e", "1-lambda_ce",
+                                 "kappa1", "kappa2", "mf_slope", "E1", "E2"]
+    assert set(names[("fixed", 2)]) == set(names[("vud", 2)]) - {"1-lambda_ce", "kappa1", "kappa2"}
+    assert set(names[("fae", 2)]) == set(names[("fixed", 2)]) | {"gamma_w"}
+    assert set(names[("vud", 3)]) - set(names[("vud", 2)]) == {"k3_fraction", "q3", "kappa3", "E3"}
+    table = tune.declared_parameters()
+    untuned = {name for name, v in table.items() if v.tuning is None}
+    assert {"variant", "order", "sets", "fls_input", "theta0", "initial_error", "e0"} <= untuned
+
+
+def test_every_declared_range_lies_in_the_valid_range_and_is_log_scaled_where_it_spans_decades():
+    for name, variable in tune.declared_parameters().items():
+        tuning = variable.tuning
+        if tuning is None:
+            continue
+        assert tuning.problem() is None, name
+        if tuning.scale in ("linear", "log", "log1m"):
+            assert variable.check(tuning.low) is None and variable.check(tuning.high) is None, name
+        span = (1 - tuning.low) / (1 - tuning.high) if tuning.scale == "log1m" else tuning.high / tuning.low
+        if span >= 10:
+            assert tuning.scale != "linear", f"{name}: range spans {span:g}x on a linear scale"
+
+
+@pytest.mark.parametrize("name", scenarios.scenario_names())
+def test_the_shipped_scenarios_start_inside_the_search_space(name):
+    scenario = scenarios.load(name)
+    table = tune.declared_parameters()
+    values = {n: v.start for n, v in table.items()}
+    values.update(scenario.components[scenario.controller_instance].parameters)
+    assert tune.paper_conditions(values, table) is None
+    for controller, variant in variants.CONTROLLER_VARIANTS.items():
+        dimensions = tune.search_space(variant, int(values["order"]))
+        for dimension, x in zip(dimensions, tune.sample_of(dimensions, values).values()):
+            low, high, _ = dimension.bounds()
+            assert low <= x <= high, (name, controller, dimension.name, x)
+
+
+@pytest.mark.parametrize("order", [3, 4])
+def test_the_hurwitz_fraction_gives_exactly_the_hurwitz_gains(order):
+    """Every fraction in (0, 1) gives a Hurwitz k (the FMU's own test), a fraction above 1 never does."""
+    from fmu_src import afc_math
+
+    generator = random.Random(order)
+    dimensions = [tune.Dimension(f"k{i}", 0.05, 50.0, "log") for i in (1, 2)]
+    dimensions += [tune.Dimension(f"k{i}", 0.001, 0.999, "hurwitz") for i in range(3, order + 1)]
+
+    def hurwitz(k):
+        try:
+            return afc_math.is_positive_definite(afc_math.lyapunov_p(k, (1.0,) * len(k)))
+        except ValueError:
+            return False
+
+    for _ in range(200):
+        sample = {"k1": 10 ** generator.uniform(-1.3, 1.7), "k2": 10 ** generator.uniform(-1.3, 1.7)}
+        fractions = [generator.uniform(0.001, 0.999) for _ in range(3, order + 1)]
+        sample.update({f"k{i}_fraction": f for i, f in zip(range(3, order + 1), fractions)})
+        values = tune.parameter_values(dimensions, sample, {})
+        k = tuple(values[f"k{i}"] for i in range(1, order + 1))
+        assert hurwitz(k), (sample, k)
+        assert tune.sample_of(dimensions, values) == pytest.approx(sample, rel=1e-9)
+        over = dict(sample, **{f"k{order}_fraction": 1.001})
+        values = tune.parameter_values(dimensions, over, {})
+        assert not hurwitz(tuple(values[f"k{i}"] for i in range(1, order + 1))), over
+
+
+def test_the_search_ranges_reach_neither_the_model_description_nor_the_c_tables(monkeypatch):
+    import build_native
+
+    cls = build_fmu.model_class(CONTROLLER)
+    with_ranges_xml = build_native.fmi2_description(CONTROLLER, "{guid}")
+    with_ranges_header = build_native.variables_header(CONTROLLER, "{guid}")
+    assert sum(v.tuning is not None for v in cls.VARIABLES) >= 14
+    monkeypatch.setattr(cls, "VARIABLES", tuple(dataclasses.replace(v, tuning=None) for v in cls.VARIABLES))
+    from xml.etree import ElementTree as ET
+
+    assert ET.tostring(build_native.fmi2_description(CONTROLLER, "{guid}")) == ET.tostring(with_ranges_xml)
+    assert build_native.variables_header(CONTROLLER, "{guid}") == with_ranges_header
+
+
+def test_the_chatter_mark_is_the_controller_fmus_own_warning():
+    from fmu_src import chatter_monitor
+
+    state = chatter_monitor.new_state()
+    assert tune.CHATTER_MARK in chatter_monitor.warning(state, 1e-3)
+
+
+def test_pareto_front_and_the_equal_effort_verdicts():
+    points = [(1.0, 5.0), (2.0, 3.0), (1.5, 6.0), (3.0, 3.0), (4.0, 1.0)]
+    assert tune.pareto_front(points) == [0, 1, 4]
+    row = lambda controller, value, error: {"controller": controller,  # noqa: E731
+                                            "best": {"scores": {"ITAE": value}, "error": {"ITAE": error}}}
+    assert tune.beats([row("fae", 0.5, 0.01), row("vud", 0.6, 0.01)], "best", "ITAE", "fae", "vud")["answer"] == "yes"
+    assert tune.beats([row("fae", 0.5, 0.1), row("vud", 0.6, 0.1)], "best", "ITAE", "fae", "vud")["answer"] \
+        .startswith("undecided")
+    assert tune.beats([row("fae", 0.7, 0.01), row("vud", 0.6, 0.01)], "best", "ITAE", "fae", "vud")["answer"] == "no"
+    result = tune.smallest([row("vud", 0.1, 0.001), row("fixed", 0.2, 0.001), row("fae", 0.15, 0.06)], "best", "ITAE")
+    assert result["controller"] == "vud" and not result["separated"]
+
+
+# ------------------------------------------------------------------ bad input
+@pytest.fixture(scope="module")
+def existing_study(tmp_path_factory, paths, edition):
+    folder = tmp_path_factory.mktemp("tune_db")
+    summary = tune.tune(config(folder, paths, edition, trials=2, stop=0.05), outputs=False)
+    return folder, summary
+
+
+def database_content(database: Path) -> str:
+    """Every row of every table (SQL dump, read-only): the study's content.  Not the file's bytes: in WAL
+    mode SQLite moves committed pages from the -wal file into the database file whenever a connection
+    closes (a checkpoint), which an earlier test's connection may do at any time when it is collected."""
+    connection = sqlite3.connect(f"file:{database}?mode=ro", uri=True)
+    try:
+        return hashlib.sha256("\n".join(connection.iterdump()).encode()).hexdigest()
+    finally:
+        connection.close()
+
+
+@pytest.mark.parametrize("arguments,expected", [
+    (["--params", "gama"], "has no parameter 'gama'; tunable: k1, k2"),
+    (["--params", "order"], "parameter order is not tunable"),
+    (["--params", "lambda_ce", "--controller", "fixed"], "no effect with controller fixed"),
+    (["--range", "gamma=5:5"], "range [5, 5] is empty"),
+    (["--range", "gamma=50:5"], "range [50, 5] is inverted"),
+    (["--range", "lambda_ce=0.5:1.5"], "1.5 is outside the valid range (0, 1) of lambda_ce"),
+    (["--objective", "ITEA"], "unknown score 'ITEA'; valid: ts, es1_pct"),
+    (["--constraint", "umx<=20"], "unknown score 'umx'"),
+    (["--objective", "es1"], "es1_pct is not defined on this run: the horizon 0.05 s is shorter than the reference"),
+    (["--constraint", "es2<=1"], "es2_pct is not defined on this run"),
+    (["--constraint", "umax=20"], "write SCORE<=LIMIT or SCORE>=LIMIT"),
+    (["--storage", "sqlite:////nonexistent-folder/x/y.db"], "cannot open the database"),
+    (["--stop", "0.1"], "was made with other settings: stop = 0.05 (now 0.1)"),
+])
+def test_bad_input_is_one_line_exit_2_and_leaves_the_database_untouched(existing_study, edition, capsys,
+                                                                        arguments, expected):
+    folder, summary = existing_study
+    database = folder / "pendulum_case1.db"
+    before = database_content(database)
+    options = ["--stop", "0.05"] if "--stop" not in arguments else []
+    status = cli_main(["tune", "pendulum_case1", "--trials", "3", "--jobs", "1", "--edition", edition, "--out",
+                       str(folder), "--quiet", *options, *arguments])
+    err = capsys.readouterr().err.strip()
+    assert status == 2, err
+    assert len(err.splitlines()) == 1 and expected in err, err
+    assert database_content(database) == before
+    assert len(trials_of(summary["storage"], summary["study"])) == 2
+
+
+# ------------------------------------------------------------------ a study end to end
+def test_a_study_writes_a_scenario_that_run_and_regress_take_and_run_reproduces_its_score_exactly(
+        tmp_path, paths, edition, capsys, monkeypatch):
+    summary = tune.tune(config(tmp_path, paths, edition, trials=6, stop=0.5, held_out=("pendulum_case2",)))
+    best = summary["best"]
+    assert best is not None and best["half_step"] is not None
+    assert summary["start"]["number"] == 0 and summary["finished"] == 6
+    toml = Path(summary["study_file"])
+    assert cli_main(["run", str(toml), "--controller", "vud", "--edition", edition, "--json"]) == 0
+    run = json.loads(capsys.readouterr().out)
+    assert run["ITAE"] == best["value"] and run["Ec"] == best["scores"]["Ec"]
+    from harness.studies import regression
+    from harness.cases import Case
+
+    monkeypatch.chdir(tmp_path.parent)  # a relative path with a folder, as `regress results/tune/X.toml` gets
+    case = Case(f"{tmp_path.name}/{toml.name}", "vud")
+    assert case.name == f"{toml.stem}_vud"
+    os.environ[fmu_catalog.EDITION_VARIABLE] = edition
+    try:
+        first = regression.regress([case], update=True, report_dir=None, reference_dir=tmp_path / "refs", workers=1)
+        again = regression.regress([case], report_dir=None, reference_dir=tmp_path / "refs", workers=1)
+    finally:
+        os.environ.pop(fmu_catalog.EDITION_VARIABLE)
+    assert first.written and again.passed
+    report = (tmp_path / "report.md").read_text()
+    for heading in ("### Best parameters", "### Parameter importances", "held-out scenarios", "pendulum_case2"):
+        assert heading in report
+    assert (tmp_path / f"{summary['study']}_pareto.png").stat().st_size > 1000
+    assert (tmp_path / f"{summary['study']}_progress.png").stat().st_size > 1000
+
+
+def test_diverging_and_chattering_candidates_are_pruned_with_the_reason(tmp_path, paths, edition):
+    scenario = scenarios.configure("pendulum_case1", "vud", stop=0.3)
+    task = {"scenario": scenario, "values": {}, "grid": [()], "fmu_paths": paths, "objective": "ITAE",
+            "verify_below": -math.inf, "tolerance": 0.01}
+    assert tune.evaluate(task)["status"] == "ok"
+    bounded = scenarios.configure("pendulum_case1", "vud", stop=0.3)
+    bounded.bounds["controller.u"] = 1.0
+    diverged = tune.evaluate(dict(task, scenario=bounded))
+    assert diverged["status"] == "diverged" and "controller.u" in diverged["reason"]
+    coarse = scenarios.configure("pendulum_case1", "vud", step=1e-3, stop=5.0)  # chatters from t ~ 3 s
+    chatter = tune.evaluate(dict(task, scenario=coarse))
+    assert chatter["status"] == "chatter" and "u chatters" in chatter["reason"]
+    # through a study: the pruned trial is kept, with its reason, and counted
+    path = tmp_path / "bounded.toml"
+    path.write_text(tune.scenario_toml(bounded))
+    summary = tune.tune(config(tmp_path, paths, edition, scenario=str(path), trials=3), outputs=False)
+    trials = trials_of(summary["storage"], summary["study"])
+    first = trials[0]
+    assert first.state == optuna.trial.TrialState.PRUNED and first.user_attrs["start"]
+    assert first.user_attrs["outcome"]["status"] == "diverged" and summary["finished"] == 3
+
+
+def test_a_best_that_moves_at_half_the_step_is_pruned_not_reported(tmp_path, paths, edition):
+    strict = tune.tune(config(tmp_path, paths, edition, trials=1, tolerance=1e-12, study="strict"), outputs=False)
+    assert strict["best"] is None and strict["counts"] == {"step-dependent": 1}
+    loose = tune.tune(config(tmp_path, paths, edition, trials=1, study="loose"), outputs=False)
+    assert loose["best"]["number"] == 0 and loose["best"]["half_step"]["change"] < 0.01
+
+
+def test_a_constraint_keeps_a_candidate_that_misses_it_from_being_best(tmp_path, paths, edition):
+    free = tune.tune(config(tmp_path, paths, edition, trials=1, study="free"), outputs=False)
+    umax = free["best"]["scores"]["umax"]
+    bound = tune.tune(config(tmp_path, paths, edition, trials=1, study="bound",
+                             constraints=(f"umax<={umax * 0.99}",)), outputs=False)
+    assert bound["best"] is None
+    trial = trials_of(bound["storage"], "bound")[0]
+    assert trial.state == optuna.trial.TrialState.COMPLETE and not tune.is_feasible(trial)
+    assert list(trial.constraints.values())[0] == pytest.approx(umax * 0.01)
+
+
+def test_robust_scores_the_worst_case_over_the_grid(tmp_path, paths, edition):
+    summary = tune.tune(config(tmp_path, paths, edition, trials=1, vary=("plant.dist_gain=0,1",),
+                               study="robust"), outputs=False)
+    best = summary["best"]
+    points = best["points"]
+    assert [p["variation"] for p in points] == [[["plant.dist_gain", 0.0]], [["plant.dist_gain", 1.0]]]
+    assert best["value"] == max(p["scores"]["ITAE"] for p in points)
+    assert points[0]["scores"]["ITAE"] != points[1]["scores"]["ITAE"]
+
+
+def test_the_same_seed_gives_the_same_trials(tmp_path, paths, edition):
+    def params(name, seed):
+        summary = tune.tune(config(tmp_path / name, paths, edition, trials=13, stop=0.05, seed=seed),
+                            outputs=False)
+        return [t.params for t in trials_of(summary["storage"], summary["study"])]
+
+    first = params("a", 3)
+    assert params("b", 3) == first
+    assert params("c", 4) != first
+
+
+# ------------------------------------------------------------------ processes and the database
+def _command(folder, edition, trials, *extra):
+    return [sys.executable, "-m", "harness", "tune", "pendulum_case1", "--stop", "0.3", "--trials", str(trials),
+            "--edition", edition, "--out", str(folder), "--quiet", "--held-out", *extra]
+
+
+def _counts(database):
+    try:
+        with sqlite3.connect(f"file:{database}?mode=ro", uri=True, timeout=30) as connection:
+            rows = connection.execute("SELECT state, count(*) FROM trials GROUP BY state").fetchall()
+    except sqlite3.OperationalError:  # the tables are not there yet
+        return {}
+    return dict(rows)
+
+
+def test_a_killed_run_resumes_with_every_finished_trial_kept(tmp_path, edition, paths):
+    database = tmp_path / "pendulum_case1.db"
+    command = _command(tmp_path, edition, 10, "--jobs", "1")
+    process = subprocess.Popen(command, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline:
+            time.sleep(0.05)
+            counts = _counts(database) if database.exists() else {}
+            if counts.get("COMPLETE", 0) + counts.get("PRUNED", 0) >= 3 and counts.get("RUNNING"):
+                os.killpg(process.pid, signal.SIGKILL)
+                break
+            assert process.poll() is None, process.stderr.read().decode()
+        else:
+            pytest.fail("the study did not get going")
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+    url = f"sqlite:///{database}"
+    study = "pendulum_case1-vud-ITAE"
+    before = {t.number: t for t in trials_of(url, study)}
+    finished = {n: t for n, t in before.items() if t.state.is_finished()}
+    running = [t for t in before.values() if t.state == optuna.trial.TrialState.RUNNING]
+    assert finished and running, {n: t.state for n, t in before.items()}
+    resumed = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=180)
+    assert resumed.returncode == 0, resumed.stderr
+    after = {t.number: t for t in trials_of(url, study)}
+    for number, trial in finished.items():  # kept as they were
+        assert after[number].state == trial.state and after[number].params == trial.params
+        assert after[number].value == trial.value
+    for trial in running:  # failed, and run again with the same parameters as a new trial
+        assert after[trial.number].state == optuna.trial.TrialState.FAIL
+        retries = [t for t in after.values() if t.system_attrs.get("failed_trial") == trial.number]
+        assert len(retries) == 1 and retries[0].state.is_finished()
+        assert all(retries[0].params[name] == value for name, value in trial.params.items())
+    assert sum(t.state.is_finished() and t.state != optuna.trial.TrialState.FAIL for t in after.values()) == 10
+
+
+def test_trials_of_dead_processes_are_failed_and_retried_those_of_live_ones_kept(tmp_path, monkeypatch):
+    import socket
+
+    storage = tune.open_storage(f"sqlite:///{tmp_path / 'x.db'}")
+    study = optuna.create_study(storage=storage, study_name="s")
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    owners = {"dead": {"host": socket.gethostname(), "pid": int(dead.stdout)},
+              "live": {"host": socket.gethostname(), "pid": os.getppid()},
+              "elsewhere": {"host": "another-host", "pid": int(dead.stdout)}, "none": None}
+    trials = {}
+    for label, owner in owners.items():
+        trial = study.ask()
+        trial.suggest_float("x", 0.0, 1.0)
+        if owner:
+            trial.set_user_attr("owner", owner)
+        trials[label] = trial.number
+    recovered, waiting = tune.recover_dead_trials(study)
+    assert recovered == [trials["dead"]] and waiting == 1  # the unclaimed one is young: it waits
+    monkeypatch.setattr(tune, "ORPHAN_S", 0.0)
+    recovered, waiting = tune.recover_dead_trials(study)
+    assert recovered == [trials["none"]] and waiting == 0
+    states = {t.number: t.state for t in study.get_trials()}
+    assert states[trials["live"]] == states[trials["elsewhere"]] == optuna.trial.TrialState.RUNNING
+    retried = [t for t in study.get_trials() if t.state == optuna.trial.TrialState.WAITING]
+    assert sorted(t.system_attrs["failed_trial"] for t in retried) == sorted([trials["dead"], trials["none"]])
+
+
+def test_two_processes_drive_one_study_to_exactly_its_budget(tmp_path, edition, paths):
+    """Started together: one creates the study, the other loads it; together they stop at the budget."""
+    started = [subprocess.Popen(_command(tmp_path, edition, 12, "--jobs", "1", "--seed", str(seed)), cwd=ROOT,
+                                stderr=subprocess.PIPE, stdout=subprocess.DEVNULL) for seed in (0, 1)]
+    for process in started:
+        assert process.wait(timeout=180) == 0, process.stderr.read().decode()
+    trials = trials_of(f"sqlite:///{tmp_path / 'pendulum_case1.db'}", "pendulum_case1-vud-ITAE")
+    owners = {t.user_attrs["owner"]["pid"] for t in trials}
+    assert owners == {process.pid for process in started}
+    finished = [t for t in trials if t.state in (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)]
+    assert len(finished) == 12 and len({t.number for t in trials}) == len(trials)
+    assert sum(bool(t.user_attrs.get("start")) for t in trials) == 1
+
+
+def test_the_docs_page_shows_the_declared_search_space_and_its_tune_commands_parse():
+    import re
+    import shlex
+
+    from harness.cli import build_parser
+
+    text = (ROOT / "docs" / "tuning.md").read_text()
+    block = text.split("<!-- search space: begin -->\n")[1].split("\n<!-- search space: end -->")[0]
+    assert block == tune.search_space_markdown(), "docs/tuning.md: paste tune.search_space_markdown()"
+    parser = build_parser()
+    commands = re.findall(r"(?m)^python -m harness (tune [^#\n]*?)\s*(?:#.*)?$", text)
+    commands += re.findall(r"`python -m harness (tune [^`]*)`", text)
+    commands = [c for c in commands if ".toml" not in c]
+    assert len(commands) >= 2
+    for command in commands:
+        parser.parse_args(shlex.split(command))
