@@ -593,8 +593,8 @@ def hosts_matrix(names, controllers=(variants.PROPOSED,), host_keys=None, step_k
                 references[(name, controller, stop)] = converged_values(name, controller, stop, fmu_paths, convergence)
             paths = native_paths if host.edition == "native" else fmu_paths
             if host.needs_ssp:
-                kind = f"me{host.ssp_rtol:g}" if host.ssp_rtol else "cs"
-                package = folder / f"{name}_{controller}_{step:g}_{stop}_{kind}_{host.edition or 'selected'}.ssp"
+                interface = f"me{host.ssp_rtol:g}" if host.ssp_rtol else "cs"
+                package = folder / f"{name}_{controller}_{step:g}_{stop}_{interface}_{host.edition or 'selected'}.ssp"
                 if not package.exists():
                     export_ssp(scenarios.configure(name, controller, step, stop), package,
                                fmu_paths=paths, rtol=host.ssp_rtol)

@@ -80,6 +80,8 @@ def converged_values(key: tuple, ladder: list, convergence: dict, stop) -> dict:
         return {}
     values = {}
     for k in SCORE_KEYS:
+        if any(run[k] is None for run in ladder):  # not defined on this horizon (harness/scores.py says why)
+            continue
         if k in GRID_READ:
             values[k] = (fine[k], f"co-simulation at {fine['step']:g} s (read off its grid)", True)
             continue
@@ -125,8 +127,9 @@ def accuracy_study(cases: list, rtols=RTOLS, compare_rtol: float = COMPARE_RTOL,
                                                  "state_events", "wall_s", "step", *SCORE_KEYS)}
             entry["rtol"] = rtol
             if outcome["status"] == "ok" and reference:
-                entry["error"] = {k: relative(outcome[k], reference[k][0]) for k in SCORE_KEYS if k not in GRID_READ}
-                entry["error"].update({k: outcome[k] - reference[k][0] for k in GRID_READ})
+                defined = [k for k in SCORE_KEYS if k in reference and outcome[k] is not None]
+                entry["error"] = {k: relative(outcome[k], reference[k][0]) for k in defined if k not in GRID_READ}
+                entry["error"].update({k: outcome[k] - reference[k][0] for k in defined if k in GRID_READ})
             runs.append(entry)
         rows.append({"scenario": name, "controller": controller, "step": scenarios.load(name).step,
                      "reference": {k: {"value": v, "how": how, "converged": ok} for k, (v, how, ok) in reference.items()},
