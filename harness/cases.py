@@ -30,11 +30,16 @@ import numpy as np
 
 import build_fmu
 
-from . import master_loop
+from . import master_loop, me_loop, me_master
 from . import scenario as scenarios
 from .fmi import FmiError
+from .master import ALGORITHMS as CO_SIMULATION_ALGORITHMS
 from .master import Divergence, SimulationFailed, simulate
 from .scores import score_run
+
+#: every algorithm a run can use: our co-simulation masters and Model Exchange (harness/me_master.py)
+ALGORITHMS = (*CO_SIMULATION_ALGORITHMS, me_master.ALGORITHM)
+SOLVER_KEYS = ("steps", "derivative_evaluations", "state_events")  # what an outcome keeps of an ME run's solver
 
 FIGURE_SIGNALS = ("plant.y", "plant.dy", "reference.ym", "reference.dym", "reference.e", "reference.de",
                   "controller.u")
@@ -56,6 +61,8 @@ class Case:
     points: int | None = None  # bring back ``signals`` resampled to this many points over [start, stop]
     signals: tuple = FIGURE_SIGNALS  # the signals brought back (with figure_interval or points)
     fmu_files: tuple = field(default=())  # (("plant", "/path/InvertedPendulum.fmu"), ...): FMU of an instance
+    rtol: float | None = None  # --algorithm me: CVODE's relative tolerance (None: me_master.DEFAULT_RTOL)
+    atol: float | None = None  # --algorithm me: absolute tolerance (None: rtol)
 
     @property
     def scenario_name(self) -> str:
@@ -78,6 +85,7 @@ class Case:
         settings += [f"{k}={v:g}" for k, v in self.overrides]
         if self.algorithm != "feedthrough":
             settings.append(self.algorithm)
+        settings += [f"{key}={value:g}" for key, value in (("rtol", self.rtol), ("atol", self.atol)) if value is not None]
         return self.name + (" [" + ", ".join(settings) + "]" if settings else "")
 
     def build(self) -> scenarios.Scenario:
@@ -123,6 +131,17 @@ def resample(time: np.ndarray, values: np.ndarray, start: float, stop: float, po
     return grid, resampled
 
 
+def simulate_any(scenario, algorithm: str = "feedthrough", fmu_paths: dict | None = None, progress=None,
+                 rtol: float | None = None, atol: float | None = None):
+    """One run with any algorithm: our co-simulation master, or the Model Exchange master for "me"."""
+    if algorithm == me_master.ALGORITHM:
+        return me_master.simulate(scenario, fmu_paths, me_master.DEFAULT_RTOL if rtol is None else rtol, atol,
+                                  progress=progress)
+    if rtol is not None or atol is not None:
+        raise scenarios.ScenarioError(f"rtol and atol are tolerances of --algorithm me, not of {algorithm}")
+    return simulate(scenario, algorithm=algorithm, fmu_paths=fmu_paths, progress=progress)
+
+
 def run_case(case: Case, fmu_paths: dict | None = None) -> dict:
     """The outcome of one case (see the module's doc); never raises for a failing simulation."""
     scenario = case.build()
@@ -132,7 +151,7 @@ def run_case(case: Case, fmu_paths: dict | None = None) -> dict:
     wall = clock.perf_counter()
     result = None
     try:
-        result = simulate(scenario, algorithm=case.algorithm, fmu_paths=fmu_paths)
+        result = simulate_any(scenario, case.algorithm, fmu_paths, rtol=case.rtol, atol=case.atol)
         outcome.update(status="ok", reason="", **score_run(result), us_per_step=result.us_per_step)
     except Exception as error:  # noqa: BLE001 - every failure of a case is an outcome, the study goes on
         if isinstance(error, SimulationFailed):
@@ -143,6 +162,9 @@ def run_case(case: Case, fmu_paths: dict | None = None) -> dict:
         outcome.update(status=status_of(error), reason=one_line(message))
     outcome["wall_s"] = clock.perf_counter() - wall
     outcome["rows"] = result.rows if result is not None else 0
+    if result is not None and result.solver:
+        outcome.update(rtol=result.solver["rtol"], atol=result.solver["atol"],
+                       **{key: result.solver[key] for key in SOLVER_KEYS})
     if case.points and result is not None:
         signals, grid = {}, None
         for name in case.signals:
@@ -289,9 +311,11 @@ def run_cases(cases: list, jobs: int | None = None, description: str = "co-simul
     if fmu_paths is None:
         fmu_paths = build_fmu.ensure_built()  # once, before the workers start
     master_loop.library()  # the compiled loop too (when zig is installed), so no two workers compile it
+    if any(case.algorithm == me_master.ALGORITHM for case in cases):
+        me_loop.library()
     return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths), cases, jobs, description, progress,
                         label=lambda case: case.label)
 
 
-__all__ = ["Case", "Progress", "run_case", "run_cases", "parallel_map", "default_jobs", "status_of", "one_line",
-           "resample"]
+__all__ = ["Case", "Progress", "run_case", "run_cases", "simulate_any", "ALGORITHMS", "parallel_map", "default_jobs",
+           "status_of", "one_line", "resample"]

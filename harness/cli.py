@@ -18,9 +18,12 @@ from . import cli_args, variants
 from . import scenario as scenarios
 from .cases import Progress
 from .hosts import bench, engines, matrix, ssp
-from .master import ALGORITHMS, SimulationFailed, simulate
+from .cases import ALGORITHMS, simulate_any
+from .master import SimulationFailed
+from .me_master import ALGORITHM as MODEL_EXCHANGE
+from .me_master import DEFAULT_RTOL
 from .scores import SCORE_KEYS, score_run, value_text, why_none
-from .studies import compat, mutation, regression, step_study, sweep, tables, tune
+from .studies import compat, me_accuracy, mutation, regression, step_study, sweep, tables, tune, work_precision
 
 
 def _progress(total: int, description: str, enabled: bool):
@@ -36,13 +39,19 @@ def _progress(total: int, description: str, enabled: bool):
 
 
 def run_command(args) -> int:
+    me = args.algorithm == MODEL_EXCHANGE
+    if not me and (args.rtol is not None or args.atol is not None):
+        raise cli_args.UsageError(f"--rtol and --atol are tolerances of --algorithm me; --algorithm {args.algorithm} "
+                                  "has a communication step (--step)")
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
     cli_args.check_output_interval(args.output_interval, scenario.step)
     progress, close = _progress(scenario.steps, f"{scenario.name}/{args.controller}", enabled=not args.json)
     for note in scenario.notes:  # e.g. the stop moved to a whole number of steps
         print(f"note: {note}", file=sys.stderr)
     try:
-        result = simulate(scenario, algorithm=args.algorithm, progress=progress)
+        result = simulate_any(scenario, args.algorithm, progress=progress,
+                              rtol=(args.rtol if args.rtol is not None else DEFAULT_RTOL) if me else None,
+                              atol=args.atol if me else None)
     except SimulationFailed as failure:
         close()
         if args.out:
@@ -51,7 +60,7 @@ def run_command(args) -> int:
         return cli_args.report(failure)
     finally:
         close()  # also when the scenario is refused before the first step
-    if scenario.path is not None and scenario.path.parent == scenarios.SCENARIO_DIR:  # one the study covers
+    if not me and scenario.path is not None and scenario.path.parent == scenarios.SCENARIO_DIR:  # one the study covers
         # after the run: a failed run says one line, its error
         warning = step_study.step_warning(scenario.name, args.controller, args.algorithm, scenario.step)
         if warning:
@@ -61,6 +70,10 @@ def run_command(args) -> int:
     scores = score_run(result)
     summary = {"scenario": scenario.name, "controller": args.controller, "step": scenario.step,
                **scores, "wall_s": result.wall_s, "us_per_step": result.us_per_step}
+    if me:  # no communication step: the step is the output interval; the integrator's statistics instead
+        summary.pop("us_per_step")
+        summary.update(algorithm=MODEL_EXCHANGE, output_interval=summary.pop("step"),
+                       **{key: value for key, value in result.solver.items() if key != "loop"})
     undefined = {key: why_none(key, scenario.start, scenario.stop) for key in SCORE_KEYS if scores[key] is None}
     if args.json:
         if undefined:  # each null score with its reason
@@ -68,8 +81,16 @@ def run_command(args) -> int:
                                    for key, reason in undefined.items()]
         print(json.dumps(summary))
     else:
-        print(f"{scenario.name} / {args.controller} ({args.algorithm}), step {scenario.step:g} s, "
-              f"{result.rows - 1} steps in {result.wall_s:.2f} s ({result.us_per_step:.1f} us/step)")
+        if me:
+            solver = result.solver
+            print(f"{scenario.name} / {args.controller} (Model Exchange, {solver['integrator']}), rtol "
+                  f"{solver['rtol']:g}, atol {solver['atol']:g}: {solver['steps']} steps, "
+                  f"{solver['derivative_evaluations']} derivative evaluations ({solver['jacobians']} Jacobians), "
+                  f"{solver['state_events']} state events, {result.rows} rows every {scenario.step:g} s in "
+                  f"{result.wall_s:.2f} s")
+        else:
+            print(f"{scenario.name} / {args.controller} ({args.algorithm}), step {scenario.step:g} s, "
+                  f"{result.rows - 1} steps in {result.wall_s:.2f} s ({result.us_per_step:.1f} us/step)")
         for key in SCORE_KEYS:
             text = value_text(key, scores[key], scenario.start, scenario.stop)
             if key in undefined:
@@ -84,11 +105,17 @@ def register_run(commands):
     run = commands.add_parser("run", help="run one scenario with one controller and score it")
     run.add_argument("scenario", type=cli_args.scenario, help=cli_args.scenario_help())
     run.add_argument("--controller", choices=variants.NAMES, default=variants.PROPOSED)
-    run.add_argument("--step", type=cli_args.positive_float, help="communication step in s (default: the scenario's)")
+    run.add_argument("--step", type=cli_args.positive_float,
+                     help="communication step in s (default: the scenario's); with --algorithm me the output interval")
     run.add_argument("--stop", type=cli_args.positive_float, help="stop time in s (default: the scenario's)")
     run.add_argument("--algorithm", choices=ALGORITHMS, default="feedthrough",
                      help="feedthrough: no delay along direct-feedthrough chains (default); "
-                          "jacobi: every connection delayed one step")
+                          "jacobi: every connection delayed one step; me: Model Exchange, no communication step "
+                          "(the native edition's FMUs integrated by CVODE; docs/model_exchange.md)")
+    run.add_argument("--rtol", type=cli_args.positive_float,
+                     help=f"--algorithm me: CVODE's relative tolerance (default {DEFAULT_RTOL:g})")
+    run.add_argument("--atol", type=cli_args.positive_float,
+                     help="--algorithm me: absolute tolerance, times each state's nominal (default: rtol)")
     run.add_argument("--out", help="write the result CSV here")
     run.add_argument("--output-interval", type=cli_args.positive_float,
                      help="thin the CSV to this interval, a multiple of the step (scores use every step)")
@@ -97,9 +124,10 @@ def register_run(commands):
 
 
 #: every subcommand, in the order of ``--help``: each lives in its own module with a ``register(commands)``
-SUBCOMMAND_REGISTRATIONS = (register_run, tables.register, step_study.register, sweep.register, regression.register,
-                            ssp.register, engines.register, bench.register, mutation.register, matrix.register,
-                            tune.register, compat.register)
+SUBCOMMAND_REGISTRATIONS = (register_run, tables.register, step_study.register, me_accuracy.register,
+                            work_precision.register, sweep.register, regression.register, ssp.register,
+                            engines.register, bench.register, mutation.register, matrix.register, tune.register,
+                            compat.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,7 +1,8 @@
 """Every FMI call of the harness, in one module (as fmpy keeps its own).
 
 :class:`Component` wraps one FMI 2.0 co-simulation instance loaded through
-fmpy's low-level ``FMU2Slave``.  Life-cycle calls go through fmpy (which
+fmpy's low-level ``FMU2Slave`` (``FMU3Slave`` for FMI 3.0); :class:`ModelExchangeComponent`
+one Model Exchange instance (``FMU2Model`` / ``FMU3Model``) for harness/me_master.py.  Life-cycle calls go through fmpy (which
 raises ``FMICallException`` on a status >= error); the per-step calls
 (``real_reader``, ``real_writer``, ``stepper``) are fmpy's raw ctypes functions
 bound once to the instance and to value-reference and value arrays prepared
@@ -19,15 +20,25 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fmpy import extract, read_model_description
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Real,
+from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Real,
                        fmi2ValueReference)
 from fmpy.fmi2 import defaultCallbacks as _fmpy_default_callbacks
-from fmpy.fmi3 import FMU3Slave, fmi3Boolean, fmi3Float64
+from fmpy.fmi3 import FMU3Model, FMU3Slave, fmi3Boolean, fmi3Float64
 
 STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal", "pending")
 FMI3_TYPE_NAMES = {"Float64": "Real", "Int32": "Integer"}
 FMI_ERROR = 3
-FMI3_FUNCTIONS = {"fmi2GetReal": "fmi3GetFloat64", "fmi2SetReal": "fmi3SetFloat64", "fmi2DoStep": "fmi3DoStep"}
+FMI3_FUNCTIONS = {"fmi2GetReal": "fmi3GetFloat64", "fmi2SetReal": "fmi3SetFloat64", "fmi2DoStep": "fmi3DoStep",
+                  "fmi2SetTime": "fmi3SetTime", "fmi2SetContinuousStates": "fmi3SetContinuousStates",
+                  "fmi2GetDerivatives": "fmi3GetContinuousStateDerivatives",
+                  "fmi2GetEventIndicators": "fmi3GetEventIndicators",
+                  "fmi2CompletedIntegratorStep": "fmi3CompletedIntegratorStep",
+                  "fmi2EnterEventMode": "fmi3EnterEventMode", "fmi2NewDiscreteStates": "fmi3UpdateDiscreteStates",
+                  "fmi2EnterContinuousTimeMode": "fmi3EnterContinuousTimeMode",
+                  "fmi2GetContinuousStates": "fmi3GetContinuousStates",
+                  "fmi2GetNominalsOfContinuousStates": "fmi3GetNominalsOfContinuousStates"}
+CO_SIMULATION, MODEL_EXCHANGE = "co-simulation", "model exchange"
+INTERFACES = (CO_SIMULATION, MODEL_EXCHANGE)
 
 
 class FmiError(RuntimeError):
@@ -83,21 +94,30 @@ class ModelInfo:
     variables: dict  # name -> fmpy ScalarVariable
     direct_dependencies: dict  # output name -> tuple of input names it depends on directly
     fmi_version: str = "2.0"  # "3.0": driven through fmpy's FMU3Slave (the native edition's FMI 3.0 FMUs)
+    interface: str = CO_SIMULATION  # the interface this info was read for: CO_SIMULATION or MODEL_EXCHANGE
+    states: int = 0  # Model Exchange: numberOfContinuousStates
+    event_indicators: int = 0  # Model Exchange: numberOfEventIndicators
+    needs_completed_integrator_step: bool = False  # Model Exchange: completedIntegratorStepNotNeeded = false
+    generation_tool: str = ""
 
     @classmethod
-    def read(cls, path) -> "ModelInfo":
+    def read(cls, path, interface: str = CO_SIMULATION) -> "ModelInfo":
+        """The description of the FMU at ``path`` for ``interface``; ValueError if it lacks it."""
         path = Path(path)
         if not path.exists():
             raise FileNotFoundError(f"FMU file not found: {path}")
+        if interface not in INTERFACES:
+            raise ValueError(f"interface {interface!r}; valid: {', '.join(INTERFACES)}")
         check_fmu_file(path)
         try:
             md = read_model_description(str(path))
         except Exception as error:  # noqa: BLE001 - fmpy raises what lxml or its own checks raise
             text = " | ".join(line.strip() for line in str(error).splitlines() if line.strip()) or type(error).__name__
             raise FmuFileError(f"{path}: its modelDescription.xml cannot be read: {text}") from None
-        if md.coSimulation is None:
-            raise FmuFileError(f"{path} is not a co-simulation FMU (its modelDescription.xml declares no "
-                               "<CoSimulation>)")
+        declared = md.coSimulation if interface == CO_SIMULATION else md.modelExchange
+        if declared is None:
+            element = "CoSimulation" if interface == CO_SIMULATION else "ModelExchange"
+            raise FmuFileError(f"{path} is not a {interface} FMU (its modelDescription.xml declares no <{element}>)")
         if md.fmiVersion.startswith("3"):
             for v in md.modelVariables:  # the FMI 2.0 type names the harness checks
                 v.type = FMI3_TYPE_NAMES.get(v.type, v.type)
@@ -111,7 +131,12 @@ class ModelInfo:
             else:
                 dependencies[unknown.variable.name] = tuple(
                     d.name for d in unknown.dependencies if d.causality == "input")
-        return cls(path, md.coSimulation.modelIdentifier, md.guid, variables, dependencies, md.fmiVersion)
+        if interface == CO_SIMULATION:
+            return cls(path, declared.modelIdentifier, md.guid, variables, dependencies, md.fmiVersion,
+                       generation_tool=md.generationTool or "")
+        return cls(path, declared.modelIdentifier, md.guid, variables, dependencies, md.fmiVersion, interface,
+                   md.numberOfContinuousStates, md.numberOfEventIndicators,
+                   bool(declared.needsCompletedIntegratorStep), md.generationTool or "")
 
 
 @dataclass
@@ -301,4 +326,135 @@ class Component:
         raise FmiError(self.name, function, status, time, list(self.log))
 
 
-__all__ = ["BoundArrayCall", "Component", "FmiError", "FmuFileError", "ModelInfo", "check_fmu_file"]
+# the Model Exchange calls of one integration step, with their C prototypes (FMI 2.0 and 3.0 share them)
+_SET_TIME = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double)
+_ARRAY_CALL = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t)
+
+
+@dataclass
+class ContinuousBlock:
+    """The continuous states and event indicators of one Model Exchange instance, bound to its slices of
+    the integrator's vectors: every call is prepared once and takes no argument."""
+
+    component: "ModelExchangeComponent"
+    offset: int  # of its states in the integrator's state vector
+    states: int
+    indicator_offset: int  # of its indicators in the vector of every event indicator
+    indicators: int
+    set_states: object  # () -> status: SetContinuousStates from the shared state array
+    get_derivatives: object  # () -> status: GetDerivatives into the shared derivative array
+    get_indicators: object  # () -> status: GetEventIndicators into the shared indicator array
+
+
+class ModelExchangeComponent(Component):
+    """One FMU instance for Model Exchange (fmpy's FMU2Model / FMU3Model).
+
+    The value reads and writes of the master's plan (``real_reader``, ``real_writer``) are those of
+    :class:`Component`; the integration adds ``set_time``, the state and derivative calls bound to
+    the integrator's arrays (:meth:`continuous_block`), and the event-mode calls.  Every call that a
+    derivative evaluation makes is a raw C function bound once (no argument conversion per call
+    beyond the time).
+    """
+
+    def _instantiate2(self, logging_on: bool):
+        self.slave = self._call("loading the FMU's shared library", lambda: FMU2Model(
+            guid=self.info.guid, unzipDirectory=self.unzip_dir,
+            modelIdentifier=self.info.model_identifier, instanceName=self.name))
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(self._log_message)
+        callbacks.allocateMemory = _fmpy_default_callbacks.allocateMemory
+        callbacks.freeMemory = _fmpy_default_callbacks.freeMemory
+        self._callbacks = callbacks
+        self._call("fmi2Instantiate", lambda: self.slave.instantiate(callbacks=callbacks, loggingOn=logging_on))
+        self._bind(2)
+
+    def _instantiate3(self, logging_on: bool):
+        self.slave = self._call("loading the FMU's shared library", lambda: FMU3Model(
+            guid=self.info.guid, unzipDirectory=self.unzip_dir,
+            modelIdentifier=self.info.model_identifier, instanceName=self.name))
+        self._call("fmi3InstantiateModelExchange", lambda: self.slave.instantiate(
+            loggingOn=logging_on, logMessage=self._log_message3))
+        self._bind(3)
+
+    def _bind(self, version: int):
+        functions = self.slave._functions
+        prefix = f"fmi{version}"
+        names = {"set_real": "fmi2SetReal", "get_real": "fmi2GetReal", "set_time": "fmi2SetTime",
+                 "set_states": "fmi2SetContinuousStates", "get_derivatives": "fmi2GetDerivatives",
+                 "get_indicators": "fmi2GetEventIndicators",
+                 "completed_step": "fmi2CompletedIntegratorStep"}
+        if version == 3:
+            names = {key: FMI3_FUNCTIONS[name] for key, name in names.items()}
+        self.addresses = {key: ctypes.cast(functions[name], ctypes.c_void_p).value for key, name in names.items()}
+        self._raw_set_real = functions[f"{prefix}SetFloat64" if version == 3 else "fmi2SetReal"]
+        self._raw_get_real = functions[f"{prefix}GetFloat64" if version == 3 else "fmi2GetReal"]
+        self._component = self.slave.component
+        self._instance = ctypes.c_void_p(self._component)
+        self._set_time = functools.partial(_SET_TIME(self.addresses["set_time"]), self._instance)
+
+    # -------------------------------------------------- the integration's calls
+    def time_setter(self):
+        """call(t) -> status: SetTime on this instance."""
+        return self._set_time
+
+    def continuous_block(self, offset: int, x, dx, indicator_offset: int, z) -> ContinuousBlock:
+        """The state, derivative and indicator calls bound to slices of ``x``, ``dx`` and ``z`` (ctypes
+        double arrays shared by every instance of the loop)."""
+        states, indicators = self.info.states, self.info.event_indicators
+
+        def bound(key, array, first, count):
+            pointer = ctypes.c_void_p(ctypes.addressof(array) + 8 * first)
+            return functools.partial(_ARRAY_CALL(self.addresses[key]), self._instance, pointer,
+                                     ctypes.c_size_t(count))
+
+        return ContinuousBlock(self, offset, states, indicator_offset, indicators,
+                               bound("set_states", x, offset, states), bound("get_derivatives", dx, offset, states),
+                               bound("get_indicators", z, indicator_offset, indicators))
+
+    def get_states(self, values) -> None:
+        """The continuous states into ``values`` (a ctypes double array or pointer of their length)."""
+        if self.info.states:
+            self._call(self._fmi("fmi2GetContinuousStates"),
+                       lambda: self.slave.getContinuousStates(values, self.info.states))
+
+    def get_nominals(self, values) -> None:
+        if self.info.states:
+            self._call(self._fmi("fmi2GetNominalsOfContinuousStates"),
+                       lambda: self.slave.getNominalsOfContinuousStates(values, self.info.states))
+
+    def enter_event_mode(self):
+        self._call(self._fmi("fmi2EnterEventMode"), self.slave.enterEventMode)
+
+    def update_discrete_states(self) -> tuple:
+        """NewDiscreteStates (FMI 3.0: UpdateDiscreteStates): (another pass needed, terminate, values of
+        continuous states changed, next event time or None)."""
+        if self.fmi3:
+            again, terminate, _, changed, timed, next_time = self._call(
+                "fmi3UpdateDiscreteStates", self.slave.updateDiscreteStates)
+        else:
+            again, terminate, _, changed, timed, next_time = self._call(
+                "fmi2NewDiscreteStates", self.slave.newDiscreteStates)
+        return bool(again), bool(terminate), bool(changed), (float(next_time) if timed else None)
+
+    def enter_continuous_time_mode(self):
+        self._call(self._fmi("fmi2EnterContinuousTimeMode"), self.slave.enterContinuousTimeMode)
+
+    def completed_integrator_step(self) -> tuple:
+        """CompletedIntegratorStep: (enter event mode, terminate)."""
+        enter, terminate = self._call(self._fmi("fmi2CompletedIntegratorStep"),
+                                      lambda: self.slave.completedIntegratorStep(True))
+        return bool(enter), bool(terminate)
+
+    def _fmi(self, function: str) -> str:
+        return FMI3_FUNCTIONS.get(function, function) if self.fmi3 else function
+
+    @property
+    def do_step_address(self) -> int:
+        raise TypeError(f"{self.name} is a Model Exchange instance: it has no doStep")
+
+    def stepper(self):
+        raise TypeError(f"{self.name} is a Model Exchange instance: it has no doStep")
+
+
+__all__ = ["BoundArrayCall", "Component", "ContinuousBlock", "FmiError", "FmuFileError", "ModelExchangeComponent",
+           "ModelInfo", "check_fmu_file", "CO_SIMULATION", "MODEL_EXCHANGE"]

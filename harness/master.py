@@ -60,6 +60,7 @@ class RunResult:
     wall_s: float
     complete: bool
     loop_s: float = float("nan")  # the fixed-step loop alone (no instantiation, initialisation, clean-up)
+    solver: dict | None = None  # --algorithm me: the integrator's statistics (harness/me_master.py)
 
     @property
     def rows(self) -> int:
@@ -500,7 +501,8 @@ class Master:
         if record is None:
             values = np.empty((0, len(scenario.record)))
         else:
-            values = record[:rows][:, self.column_order]
+            order = self.column_order  # the record's columns in the scenario's record order: a view if they are
+            values = record[:rows] if order == list(range(len(order))) else record[:rows][:, np.asarray(order)]
         time = scenario.start + np.arange(rows) * scenario.step
         return RunResult(scenario, self.algorithm, time, list(scenario.record), values, wall_s, complete,
                          getattr(self, "loop_s", float("nan")) if complete else float("nan"))

@@ -111,6 +111,35 @@ def _address(array) -> int:
     return ctypes.addressof(array)
 
 
+def plan_actions(plan: list) -> tuple:
+    """(Action array, ctypes objects it points into) for a plan of harness.master (its _Read and _Write
+    actions): the same value-reference and value arrays, the same FMI function pointers and bounds."""
+    keep = []
+    actions = (Action * len(plan))()
+    for action, entry in zip(plan, actions):
+        array = action.array
+        component = action.component
+        entry.fmi_version = 3 if component.fmi3 else 2
+        entry.instance = component.instance_address
+        entry.call = array.function_address
+        entry.references = _address(array.references)
+        entry.count = len(array.values)
+        entry.values = _address(array.values)
+        if action.copies is None:
+            entry.kind = ACTION_READ
+            entry.first_column, entry.recorded = action.first_column, action.recorded
+            continue
+        entry.kind = ACTION_WRITE
+        if [k for k, *_ in action.copies] != list(range(entry.count)):
+            raise ValueError("a write's copies must fill its value array in order")
+        sources = (ctypes.c_void_p * entry.count)(*[_address(source) for _, source, _, _ in action.copies])
+        source_index = (ctypes.c_size_t * entry.count)(*[j for _, _, j, _ in action.copies])
+        bounds = (ctypes.c_double * entry.count)(*[bound for *_, bound in action.copies])
+        keep += [sources, source_index, bounds]
+        entry.sources, entry.source_index, entry.bounds = _address(sources), _address(source_index), _address(bounds)
+    return actions, keep
+
+
 class CompiledLoop:
     """A plan of harness.master (its _Read and _Write actions) and steppers, ready for master_loop_run."""
 
@@ -119,29 +148,7 @@ class CompiledLoop:
         self.plan = plan
         self.components = components
         self.record = record
-        self._keep = []  # ctypes objects the C side points into
-        actions = (Action * len(plan))()
-        for action, entry in zip(plan, actions):
-            array = action.array
-            component = action.component
-            entry.fmi_version = 3 if component.fmi3 else 2
-            entry.instance = component.instance_address
-            entry.call = array.function_address
-            entry.references = _address(array.references)
-            entry.count = len(array.values)
-            entry.values = _address(array.values)
-            if action.copies is None:
-                entry.kind = ACTION_READ
-                entry.first_column, entry.recorded = action.first_column, action.recorded
-                continue
-            entry.kind = ACTION_WRITE
-            if [k for k, *_ in action.copies] != list(range(entry.count)):
-                raise ValueError("a write's copies must fill its value array in order")
-            sources = (ctypes.c_void_p * entry.count)(*[_address(source) for _, source, _, _ in action.copies])
-            source_index = (ctypes.c_size_t * entry.count)(*[j for _, _, j, _ in action.copies])
-            bounds = (ctypes.c_double * entry.count)(*[bound for *_, bound in action.copies])
-            self._keep += [sources, source_index, bounds]
-            entry.sources, entry.source_index, entry.bounds = _address(sources), _address(source_index), _address(bounds)
+        actions, self._keep = plan_actions(plan)  # _keep: ctypes objects the C side points into
         steppers = (Stepper * len(components))()
         for component, entry in zip(components, steppers):
             entry.fmi_version = 3 if component.fmi3 else 2
@@ -163,4 +170,4 @@ class CompiledLoop:
         return self.outcome
 
 
-__all__ = ["CompiledLoop", "LoopUnavailable", "library", "choice", "ENVIRONMENT_SWITCH"]
+__all__ = ["CompiledLoop", "plan_actions", "Action", "LoopUnavailable", "library", "choice", "ENVIRONMENT_SWITCH"]

@@ -12,8 +12,9 @@ Rules (docs/architecture.md draws them):
 * the harness's top level holds the core only (studies in harness/studies/, host runners in
   harness/hosts/);
 * ``build_native`` never reaches ``build_fmu`` (``build_fmu`` may import ``build_native``), and
-  the master's compiled loop reaches no FMU build and no FMU source: ``harness.master_loop``
-  imports only the C toolchain helper, which imports no project module.
+  the masters' compiled loops reach no FMU build and no FMU source: ``harness.master_loop`` and
+  ``harness.me_loop`` import only the C toolchain helper (and the core beside them), which imports
+  no project module.
 
 Every rule is also run on small synthetic source trees that break it, so each check is seen to fail.
 """
@@ -31,7 +32,7 @@ PACKAGES = ("harness", "plants", "fmu_src")
 #: the co-simulation core at the top of harness/ (docs/architecture.md); anything else goes in a sub-package
 CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harness.scenario", "harness.variants",
         "harness.fmi", "harness.master", "harness.master_loop", "harness.scores", "harness.cases",
-        "harness.units"}
+        "harness.units", "harness.me_master", "harness.me_loop", "harness.cvode"}
 COMPOSITION_ROOT = "harness.cli"
 STUDIES, HOSTS = "harness.studies", "harness.hosts"
 #: what the master's compiled loop may never reach, directly or through other modules
@@ -199,12 +200,14 @@ def violations(root: Path = ROOT) -> list:
                             "harness/studies/ or harness/hosts/ (or add it to the core deliberately)")
     if "build_fmu" in reachable(imports, "build_native"):
         problems.append("build_native reaches build_fmu (build_fmu may import build_native, not the reverse)")
-    if "harness.master_loop" in files:
-        reached = reachable(imports, "harness.master_loop")
+    for loop in ("harness.master_loop", "harness.me_loop"):
+        if loop not in files:
+            continue
+        reached = reachable(imports, loop)
         for forbidden in LOOP_FORBIDDEN:
             hits = sorted(m for m in reached if m == forbidden or m.startswith(forbidden + "."))
             if hits:
-                problems.append(f"harness.master_loop reaches {', '.join(hits)}: the compiled loop needs only "
+                problems.append(f"{loop} reaches {', '.join(hits)}: the compiled loop needs only "
                                 "c_toolchain")
     if "c_toolchain" in files:
         own = sorted({i.target for i in imports if i.source == "c_toolchain"})

@@ -48,12 +48,14 @@ def test_bench_times_the_main_job_in_both_editions_when_asked(monkeypatch, capsy
 
     monkeypatch.setattr(bench, "bench", lambda *args: {**FAKE_FIGURES, "notes": {}})
     timed = []
-    monkeypatch.setattr(bench, "tables_wall_seconds", lambda edition: timed.append(edition) or {"native": 5.4}[edition])
+    monkeypatch.setattr(bench, "tables_wall_seconds", lambda edition, algorithm=None: timed.append((edition, algorithm))
+                        or {("native", None): 5.4, ("native", "me"): 6.1}[(edition, algorithm)])
     assert cli_main(["bench", "--tables"]) == 0
     output = capsys.readouterr().out
-    assert timed == ["native", "python"]
+    assert timed == [("native", None), ("native", "me"), ("python", None)]
     assert "target: `tables --edition native` (the Table I/II report, " in output
-    assert "<= 10 s wall: 5.4 s; pythonfmu edition: failed KeyError: 'python'" in output
+    assert "<= 10 s wall: 5.4 s; pythonfmu edition: failed KeyError: ('python', None)" in output
+    assert "target: `tables --edition native --algorithm me` (Model Exchange) <= 10 s wall: 6.1 s" in output
 
 
 def test_the_main_job_is_timed_as_a_user_runs_it(fmu_paths):

@@ -288,7 +288,7 @@ def test_a_misspelt_option_or_choice_gets_its_close_match(no_handler, capsys):
     choices = ", ".join(f"'{name}'" for name in variants.NAMES)  # the variant registry, in its order
     assert f"invalid choice: 'vdu'; did you mean 'vud'? (choose from {choices})" in capsys.readouterr().err
     assert cli.main(["run", "pendulum_case1", "--zzz"]) == 2
-    assert "unrecognized option --zzz; valid: --algorithm, --controller, --edition, " in capsys.readouterr().err
+    assert "unrecognized option --zzz; valid: --algorithm, --atol, --controller, --edition, " in capsys.readouterr().err
 
 
 def test_a_negative_number_in_any_notation_is_a_value_refused_with_the_valid_range(no_handler, capsys):

@@ -233,3 +233,52 @@ def test_a_host_that_is_not_python_needs_libpython_preloaded(packages, tmp_path)
     header, first = (tmp_path / "loop_True.csv").read_text().splitlines()[:2]
     assert "controller::mf_slope[REAL]" in header
     assert float(first.split(",")[header.split(", ").index("controller::mf_slope[REAL]")]) == 1.5
+
+
+def test_the_step_is_in_every_engines_annotation(packages):
+    """Ours and libcosim's in the DefaultExperiment, OMSimulator's (its C API's FixedStepMaster) on the System;
+    the package still validates against the SSP 1.0 schemas (fmpy's read_ssd)."""
+    from fmpy.ssp.ssd import read_ssd
+    from lxml import etree
+
+    with zipfile.ZipFile(packages[True]) as package:
+        root = etree.fromstring(package.read("SystemStructure.ssd"))
+    read_ssd(str(packages[True]))
+    namespaces = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+                  "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+                  "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd",
+                  "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+                  "afc": "https://afc-fmi.invalid/ssp/experiment"}
+    steps = {
+        "ours": root.xpath("ssd:DefaultExperiment//afc:Experiment/@stepSize", namespaces=namespaces),
+        "libcosim": root.xpath("ssd:DefaultExperiment//osp:FixedStepAlgorithm/@baseStepSize", namespaces=namespaces),
+        "omsimulator": root.xpath("ssd:System/ssd:Annotations/ssc:Annotation[@type='org.openmodelica']"
+                                  "/oms:Annotations/oms:SimulationInformation/oms:FixedStepMaster/@stepSize",
+                                  namespaces=namespaces)}
+    assert {engine: [float(v) for v in values] for engine, values in steps.items()} == \
+        {"ours": [1e-4], "libcosim": [1e-4], "omsimulator": [1e-4]}  # the packages fixture's step
+
+
+def test_a_model_exchange_package_declares_omsimulators_cvode_for_every_component(tmp_path, capsys):
+    import build_native
+    from fmpy.ssp.ssd import read_ssd
+    from lxml import etree
+
+    if not build_native.compiler_available():
+        pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
+    out = tmp_path / "me.ssp"
+    assert cli_main(["export-ssp", "manipulator", "--edition", "native", "--algorithm", "me", "--rtol", "1e-9",
+                     "--stop", "0.1", "--out", str(out)]) == 0
+    assert "Model Exchange: OMSimulator's CVODE at rtol 1e-09" in capsys.readouterr().out
+    read_ssd(str(out))
+    with zipfile.ZipFile(out) as package:
+        root = etree.fromstring(package.read("SystemStructure.ssd"))
+    oms = {"oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd",
+           "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription"}
+    (solver,) = root.xpath("ssd:System/ssd:Annotations//oms:SimulationInformation", namespaces=oms)
+    assert dict(solver.attrib) == {"name": "cvode", "method": "cvode", "tolerance": "1e-09"}
+    assigned = root.xpath("ssd:System/ssd:Elements/ssd:Component//oms:SimulationInformation/@name", namespaces=oms)
+    assert assigned == ["cvode"] * 3
+    assert cli_main(["export-ssp", "manipulator", "--edition", "python", "--algorithm", "me", "--out",
+                     str(tmp_path / "no.ssp")]) == 2
+    assert "has no Model Exchange interface" in capsys.readouterr().err

@@ -41,7 +41,8 @@ def test_every_host_at_its_validated_step_is_within_1_percent_without_false_warn
     """Within 1 %; no warning where the host propagates initial values, the re-latch warning where it does not."""
     if key in matrix["skipped"]:
         pytest.skip(f"{key}: {matrix['skipped'][key]}")
-    rows = rows_of(matrix, key, "validated")
+    # Model Exchange has no communication step: its one row is on the scenario's step as output grid
+    rows = rows_of(matrix, key, "output grid" if hosts.HOSTS_BY_KEY[key].model_exchange else "validated")
     assert rows, f"no row for {key}"
     for row in rows:
         assert row["status"] == "ok", row.get("reason")
@@ -112,3 +113,21 @@ def test_the_native_edition_gives_every_host_the_same_rows_and_warnings(monkeypa
     assert len(rows["native"]) == len(hosts.HOSTS) - len(matrix["skipped"])
     assert any(row["warnings"] for row in rows["native"])  # the re-latch warnings of the hosts without propagation
     assert rows["native"] == rows["python"]
+
+
+def test_a_host_with_a_step_cap_runs_a_shorter_horizon_and_the_table_says_so():
+    """OMSimulator keeps every step in memory: its runs stop after OMSIMULATOR_MAX_STEPS steps."""
+    oms = hosts.HOSTS_BY_KEY["omsimulator-wc"]
+    assert oms.max_steps == hosts.OMSIMULATOR_MAX_STEPS
+    assert oms.horizon(20.0, 5e-4) == 20.0  # 40 000 steps: within the cap
+    assert oms.horizon(20.0, 5e-5) == pytest.approx(2.0) and oms.horizon(20.0, 1e-4) == pytest.approx(4.0)
+    assert hosts.HOSTS_BY_KEY["ours-feedthrough"].horizon(20.0, 5e-5) == 20.0
+    row = {"scenario": "manipulator", "controller": "vud", "host": "omsimulator-wc", "step": 5e-5, "stop": 2.0,
+           "step_kind": "cs", "status": "ok", "error": {"ITAE": 1e-4, "IAE": 1e-4, "Ec": 1e-4}, "warnings": [],
+           "warnings_from": "console", "wall_s": 1.0}
+    full = dict(row, host="ours-feedthrough", stop=20.0, step_kind="scenario")
+    text = hosts.matrix_markdown({"rows": [row, full], "skipped": {}, "wall_s": 1.0, "stops": {"manipulator": None},
+                                  "accuracy": 0.01})
+    capped = [line for line in text.splitlines() if "`omsimulator-wc`" in line and line.startswith("| manipulator")]
+    assert capped and "5e-05 (cs), over 2 s (40000 steps: its memory)" in capped[0]
+    assert not any("over 20 s" in line for line in text.splitlines() if "`ours-feedthrough`" in line)

@@ -151,3 +151,27 @@ def test_the_references_hold_for_the_native_edition(edition, tmp_path, capsys):
     assert cli_main(["regress", "--edition", edition, "--report", str(tmp_path)]) == 0
     count = len(regression.all_cases())
     assert f"{count}/{count} cases pass" in capsys.readouterr().out
+
+
+def test_model_exchange_holds_to_references_of_its_own(tmp_path, capsys):
+    """The co-simulation's references carry its O(step) error, beyond the tube in the controller's transient;
+    Model Exchange has its own (harness/references/model_exchange/)."""
+    import build_native
+
+    if not build_native.compiler_available():
+        pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
+    for case in regression.all_cases(algorithm="me"):
+        csv_path, json_path = regression.reference_paths(case, regression.MODEL_EXCHANGE_REFERENCE_DIR)
+        meta = json.loads(json_path.read_text())
+        assert csv_path.exists() and meta["algorithm"] == "me" and meta["rtol"] > 0
+    assert cli_main(["regress", "pendulum_case1", "manipulator", "--controller", "vud", "--algorithm", "me",
+                     "--edition", "native", "--report", str(tmp_path)]) == 0
+    assert "2/2 cases pass" in capsys.readouterr().out
+    # against the co-simulation's references instead: outside the tube in the transient
+    import build_fmu
+
+    outcome = regression.regress([Case("pendulum_case1", "fixed", algorithm="me")], report_dir=None,
+                                 reference_dir=regression.REFERENCE_DIR, fmu_paths=build_fmu.ensure_built(edition="native"))
+    assert not outcome.passed
+    failed = {s.signal for c in outcome.comparisons for s in c.signals if not s.passed}
+    assert "controller.theta1" in failed

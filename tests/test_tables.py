@@ -4,6 +4,9 @@ import re
 
 import matplotlib
 import numpy as np
+import pytest
+
+import build_native
 
 from harness import cases
 from harness.cli import main as cli_main
@@ -105,3 +108,19 @@ def test_figures_define_the_controllers_and_draw_the_settling_band(fmu_paths):
         assert [t.get_text() for t in error.get_legend().get_texts()] == ["5 % band of max|ym| (ts)"]
     finally:
         plt.close(fig)
+
+
+def test_tables_in_model_exchange_decide_the_claims_on_tolerance_ladders(tmp_path, capsys, monkeypatch):
+    if not build_native.compiler_available():
+        pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
+    code = cli_main(["tables", "--edition", "native", "--algorithm", "me", "--rtol", "1e-8", "--out", str(tmp_path),
+                     "--stop", "0.3", "--jobs", "2", "--refine", "0"])
+    assert code == 0, capsys.readouterr().err
+    with open(tmp_path / "table2.csv") as stream:
+        rows = list(csv.DictReader(stream))
+    assert all(r["status"] == "ok" and r["validated_step"] == "" for r in rows)
+    report = (tmp_path / "report.md").read_text()
+    assert "one Model Exchange run (the native FMUs integrated together by CVODE, rtol 1e-08" in report
+    assert "tolerance ladders" in report and report.count(" ± ") >= 8 * 3
+    assert cli_main(["tables", "--rtol", "1e-8", "--out", str(tmp_path), "--stop", "0.1"]) == 2
+    assert "--rtol is the tolerance of --algorithm me" in capsys.readouterr().err

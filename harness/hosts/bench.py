@@ -39,6 +39,7 @@ from .. import scenario as scenarios
 from ..cases import default_jobs
 from ..fmi import Component, ModelInfo
 from ..master import Master, resolve_fmu
+from ..me_master import ModelExchangeMaster
 from ..studies.oracle import simulate_oracle
 from . import engines, ssp
 from .libcosim import run_libcosim, with_algorithm
@@ -143,6 +144,15 @@ def master_us_per_step(scenario, algorithm: str, fmu_paths: dict | None = None,
 
 
 LIBCOSIM_OBSERVERS = ("none", "scored", "recorded", "every")
+
+
+def me_us_per_row(scenario, fmu_paths: dict) -> tuple:
+    """Our Model Exchange master (harness/me_master.py, default rtol): microseconds per output row of its
+    integration loop, and of the whole run; it has no communication step, its rows are the scenario's grid."""
+    began = clock.perf_counter()
+    result = ModelExchangeMaster(scenario, fmu_paths).run()
+    whole = clock.perf_counter() - began
+    return 1e6 * result.loop_s / (result.rows - 1), 1e6 * whole / (result.rows - 1)
 
 
 def libcosim_us_per_step(package_dir: Path, scenario, observer: str = "none") -> float:
@@ -275,6 +285,7 @@ def bench(scenario_name="pendulum_case1", controller=variants.PROPOSED, stop=2.0
                 "native_feedthrough": lambda: master_us_per_step(scenario, "feedthrough", native),
                 "native_feedthrough_python_loop": lambda: master_us_per_step(scenario, "feedthrough", native,
                                                                              loop="python"),
+                "native_me": lambda: me_us_per_row(scenario, native),
                 "libcosim_native": lambda: libcosim_us_per_step(libcosim_native, scenario),
                 **{f"libcosim_native_{observer}": functools.partial(libcosim_us_per_step, libcosim_native, scenario,
                                                                     observer) for observer in LIBCOSIM_OBSERVERS[1:]},
@@ -305,14 +316,16 @@ def bench(scenario_name="pendulum_case1", controller=variants.PROPOSED, stop=2.0
     return figures
 
 
-TABLES_TARGET_S = {"native": 10.0}  # issue 16: `tables --edition native` on 2 cores
+TABLES_TARGET_S = {"native": 10.0, "native_me": 10.0}  # issues 16, 22: `tables --edition native [--algorithm me]`
 
 
-def tables_wall_seconds(edition: str, stop: float | None = None) -> float:
-    """Wall time of ``python -m harness tables --edition EDITION`` (a process of its own, output
-    to a temporary folder), as a user runs it: the main job's figure, in the benchmark."""
+def tables_wall_seconds(edition: str, stop: float | None = None, algorithm: str | None = None) -> float:
+    """Wall time of ``python -m harness tables --edition EDITION [--algorithm ALGORITHM]`` (a process of its
+    own, output to a temporary folder), as a user runs it: the main job's figure, in the benchmark."""
     with tempfile.TemporaryDirectory(prefix="afc_bench_tables_") as folder:
         command = [sys.executable, "-m", "harness", "tables", "--edition", edition, "--out", folder]
+        if algorithm:
+            command += ["--algorithm", algorithm]
         if stop is not None:
             command += ["--stop", repr(stop)]
         started = clock.perf_counter()
@@ -327,12 +340,13 @@ def tables_wall_seconds(edition: str, stop: float | None = None) -> float:
 def bench_command(args) -> int:
     figures = bench(args.scenario, args.controller, args.stop, args.step, args.repeat)
     if args.tables:
-        for edition in ("native", "python"):
+        for key, edition, algorithm in (("native", "native", None), ("native_me", "native", "me"),
+                                        ("python", "python", None)):
             try:
-                figures[f"tables_{edition}_s"] = tables_wall_seconds(edition)
+                figures[f"tables_{key}_s"] = tables_wall_seconds(edition, algorithm=algorithm)
             except Exception as error:  # noqa: BLE001 - reported beside the figures, as the engines are
-                figures[f"tables_{edition}_s"] = None
-                figures["notes"][f"tables_{edition}"] = f"{type(error).__name__}: {error}"
+                figures[f"tables_{key}_s"] = None
+                figures["notes"][f"tables_{key}"] = f"{type(error).__name__}: {error}"
     if args.json:
         print(json.dumps(figures))
         return 0
@@ -347,6 +361,7 @@ def bench_command(args) -> int:
             ("floor: bare fmpy calls, null FMUs", "floor"), ("oracle: same math, no FMI", "oracle"),
             ("native FMUs, our master (feedthrough)", "native_feedthrough"),
             ("  the same, Python loop", "native_feedthrough_python_loop"),
+            ("native FMUs, Model Exchange (us per row)", "native_me"),
             ("libcosim, pythonfmu FMUs, 0 workers", "libcosim_python"),
             ("libcosim, native FMUs, 0 workers", "libcosim_native"),
             ("  + observing the 5 scored signals", "libcosim_native_scored"),
@@ -381,12 +396,13 @@ def bench_command(args) -> int:
         if own is not None and null is not None:
             print(f"  {name:40s} {own:9.2f} {null:9.2f} {own - null:10.2f}")
     if args.tables:
-        native_s, python_s = figures.get("tables_native_s"), figures.get("tables_python_s")
-        text = {key: "failed" if value is None else f"{value:.1f} s" for key, value in
-                (("native", native_s), ("python", python_s))}
+        text = {key: "failed" if figures.get(f"tables_{key}_s") is None else f"{figures[f'tables_{key}_s']:.1f} s"
+                for key in ("native", "native_me", "python")}
         print(f"  target: `tables --edition native` (the Table I/II report, {default_jobs()} processes) <= "
               f"{TABLES_TARGET_S['native']:g} s wall: {text['native']}; pythonfmu edition: {text['python']} "
               f"{figures['notes'].get('tables_native', '')}{figures['notes'].get('tables_python', '')}")
+        print(f"  target: `tables --edition native --algorithm me` (Model Exchange) <= "
+              f"{TABLES_TARGET_S['native_me']:g} s wall: {text['native_me']} {figures['notes'].get('tables_native_me', '')}")
     else:
         print("  (`--tables` also times `tables` in both editions: the main job)")
     fmpy_whole = figures.get("fmpy_ssp_whole_us")
@@ -405,7 +421,7 @@ def register(commands):
     parser.add_argument("--repeat", type=cli_args.positive_int, default=3, help="measurements per figure; the best counts")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--tables", action="store_true",
-                        help="also time `tables` (the Table I/II report, full horizon) in both editions: "
-                             "about 5 s native, 50 s pythonfmu")
+                        help="also time `tables` (the Table I/II report, full horizon) in both editions and with "
+                             "--algorithm me: about 5 s native, 10 s native Model Exchange, 50 s pythonfmu")
     parser.set_defaults(handler=bench_command)
 

@@ -21,6 +21,12 @@ converged result (harness/studies/step_study.py) over the same horizon.  Hosts
 * ``fmutool-parallel`` / ``fmutool-seq-forward`` / ``fmutool-seq-reverse``:
   fmu-manipulation-toolbox containers run by fmpy: parallel (Jacobi),
   sequential in the order plant, reference, controller and in the reverse.
+* ``ours-me``: our Model Exchange master (harness/me_master.py: CVODE over every FMU's states,
+  no communication step; the native edition).
+* ``omsimulator-wc`` / ``omsimulator-wc-capi`` / ``omsimulator-sc``: OpenModelica's OMSimulator
+  (harness/hosts/omsimulator.py) on the exported SSP: its co-simulation master through its Python
+  API (step set by hand) and through its C API (step from the SSP's annotation), and its strongly
+  coupled mode on an ``--algorithm me`` package (its CVODE over the Model Exchange FMUs).
 
 Warnings are the FMU log messages with status Warning: from the logger
 callback where the host takes one (our master, the plain fmpy script, the
@@ -59,15 +65,17 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 
 import build_fmu
+import build_native
 
 from .. import cli_args, variants
 from .. import scenario as scenarios
 from ..cases import Case, parallel_map, run_case
 from ..fmi import ModelInfo
 from ..master import Master, resolve_fmu
+from ..me_master import DEFAULT_RTOL, ModelExchangeMaster
 from ..scores import control_energy, iae, itae, total_variation_rate
 from ..studies.step_study import CONTROLLERS, load_convergence, richardson, validated_step
-from . import engines
+from . import engines, omsimulator
 from .ssp import export_ssp
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -90,6 +98,20 @@ class Host:
     package: str | None = None  # the PyPI distribution it needs beyond the project's dependencies
     module: str | None = None  # that distribution's import name (checked before the host runs)
     needs_ssp: bool = False  # runs the scenario exported as an SSP package (handed to ``run`` as ``package``)
+    ssp_rtol: float | None = None  # the package is an --algorithm me one with this CVODE tolerance
+    unavailable: Callable | None = None  # () -> why the host cannot run here, or None (instead of ``module``)
+    edition: str | None = None  # "native": the native FMUs (FMI 2.0) whatever edition the matrix runs
+    max_steps: int | None = None  # the longest run it is given, in communication steps (its memory grows per step)
+
+    @property
+    def model_exchange(self) -> bool:
+        return self.family == "me"
+
+    def horizon(self, stop: float, step: float) -> float:
+        """The stop time of its run: ``stop``, or the last whole step within ``max_steps``."""
+        if self.max_steps is None or stop <= self.max_steps * step:
+            return stop
+        return round(self.max_steps * step, 12)
 
 
 #: hosts that do not hand the FMU's log messages to us, and what we found
@@ -105,6 +127,10 @@ def host_available(host: Host) -> str | None:
     """None if the host can run here, else the reason."""
     if host.module and importlib.util.find_spec(host.module) is None:
         return f"{host.package} is not installed (pip install -e '.[hosts]')"
+    if host.unavailable is not None and host.unavailable():
+        return host.unavailable()
+    if host.edition == "native" and not build_native.compiler_available():
+        return "it runs the native edition's FMUs, and zig's C compiler is not installed (pip install -e '.[native]')"
     return None
 
 
@@ -173,6 +199,31 @@ def run_ours(scenario, fmu_paths, package=None, algorithm: str = "feedthrough") 
     s = result.signal
     return Trajectory(result.time, s("plant.y"), s("plant.dy"), s("reference.ym"), s("reference.dym"),
                       s(scenario.signals["u"])), warnings, "FMI logger callback"
+
+
+def run_ours_me(scenario, fmu_paths, package=None) -> tuple:
+    master = ModelExchangeMaster(scenario, fmu_paths)
+    result = master.run()
+    warnings = [f"{name}: {line}" for name, log in master.logs.items() for line in log if line.startswith("[WARNING]")]
+    s = result.signal
+    return Trajectory(result.time, s("plant.y"), s("plant.dy"), s("reference.ym"), s("reference.dym"),
+                      s(scenario.signals["u"])), warnings, "FMI logger callback"
+
+
+def run_omsimulator(scenario, fmu_paths, package: Path, api: str = "python") -> tuple:
+    """OMSimulator on the exported package: "python" (its co-simulation master, the step set by hand), "capi"
+    (the step from the package's annotation) or "sc" (strongly coupled, its CVODE on the Model Exchange FMUs)."""
+    names = ["plant.y", "plant.dy", "reference.ym", "reference.dym", scenario.signals["u"]]
+    with captured_console() as lines:
+        if api == "capi":
+            time, columns = omsimulator.run_c_api(package, scenario.stop, names)
+        elif api == "sc":
+            time, columns = omsimulator.run_python_api(package, scenario.stop, names, output_step=scenario.step)
+        else:
+            time, columns = omsimulator.run_python_api(package, scenario.stop, names, fixed_step=scenario.step)
+    # its own complaint that it lacks the SSP schema files of its install is not an FMU's warning
+    warnings = [w for w in console_warnings(lines) if "could not load the ssd schema file" not in w]
+    return Trajectory(time, *(columns[n] for n in names)), warnings, "console (OMSimulator prints the FMUs' messages)"
 
 
 def run_plain_fmpy(scenario, fmu_paths, package=None, order: tuple | None = None) -> tuple:
@@ -397,6 +448,10 @@ def run_container(scenario, fmu_paths, package=None, mode: str = "parallel") -> 
         "FMI logger callback of the container, which forwards the embedded FMUs' messages (fmpy)"
 
 
+#: OMSimulator keeps what it simulates in memory: 2.8 GB for the pendulum's 40 000 steps (measured, either
+#: API), so 20 s of the manipulator's 50 us steps would need some 28 GB: its runs stop after this many steps
+OMSIMULATOR_MAX_STEPS = 40_000
+
 # ------------------------------------------------------- the host registry
 #: one row per host: a new host is its run function above and its row here
 HOSTS = [
@@ -425,6 +480,20 @@ HOSTS = [
     Host("fmutool-seq-reverse", "fmu-manipulation-toolbox container",
          "sequential controller > reference > plant; run by fmpy", "jacobi",
          functools.partial(run_container, mode="seq-reverse"), "fmu-manipulation-toolbox", "fmu_manipulation_toolbox"),
+    Host("ours-me", "our master", f"--algorithm me: Model Exchange, CVODE rtol {DEFAULT_RTOL:g}; native edition", "me",
+         run_ours_me, edition="native"),
+    Host("omsimulator-wc", "OMSimulator 3 (Python API)", "exported SSP; its co-simulation master, step set by hand "
+         "(setFixedStepSize: this API reads no step annotation)", "feedthrough",
+         functools.partial(run_omsimulator, api="python"), needs_ssp=True, unavailable=omsimulator.unavailable,
+         edition="native", max_steps=OMSIMULATOR_MAX_STEPS),
+    Host("omsimulator-wc-capi", "OMSimulator 3 (C API oms_importFile)", "exported SSP; its co-simulation master, "
+         "step from the SSP's org.openmodelica annotation", "feedthrough",
+         functools.partial(run_omsimulator, api="capi"), needs_ssp=True, unavailable=omsimulator.unavailable,
+         edition="native", max_steps=OMSIMULATOR_MAX_STEPS),
+    Host("omsimulator-sc", "OMSimulator 3 (Python API)", "export-ssp --algorithm me --rtol 1e-8: strongly coupled, "
+         "its CVODE over the Model Exchange FMUs; native edition", "me",
+         functools.partial(run_omsimulator, api="sc"), needs_ssp=True, ssp_rtol=1e-8,
+         unavailable=omsimulator.unavailable, edition="native", max_steps=OMSIMULATOR_MAX_STEPS),
 ]
 HOSTS_BY_KEY = {h.key: h for h in HOSTS}
 
@@ -473,6 +542,9 @@ def plan(names, controllers, host_keys, step_kinds, convergence) -> list:
             for key in host_keys:
                 host = HOSTS_BY_KEY[key]
                 steps = {}
+                if host.model_exchange:  # no communication step: the scenario's step is the output grid
+                    rows.append((key, name, controller, scenario_step, "output grid"))
+                    continue
                 if "validated" in step_kinds:
                     validated = validated_step(convergence, name, controller, host.family)
                     if validated is None:
@@ -495,6 +567,11 @@ def hosts_matrix(names, controllers=(variants.PROPOSED,), host_keys=None, step_k
     folder = Path(tempfile.mkdtemp(prefix="afc_hosts_"))  # SSP packages and a private copy of the FMUs
     fmu_paths = {name: Path(shutil.copy(path, folder / path.name)) for name, path in build_fmu.ensure_built().items()}
     host_keys = list(host_keys or HOSTS_BY_KEY)
+    native_paths = None
+    if any(HOSTS_BY_KEY[k].edition == "native" for k in host_keys) and build_native.compiler_available():
+        (folder / "native").mkdir()
+        native_paths = {name: Path(shutil.copy(path, folder / "native" / path.name))
+                        for name, path in build_fmu.ensure_built(edition="native").items()}
     skipped = {}
     for key in list(host_keys):
         reason = host_available(HOSTS_BY_KEY[key])
@@ -504,17 +581,24 @@ def hosts_matrix(names, controllers=(variants.PROPOSED,), host_keys=None, step_k
     began = clock.perf_counter()
     planned = plan(names, controllers, host_keys, step_kinds, convergence)
     try:
-        references = {(n, c): converged_values(n, c, stops.get(n), fmu_paths, convergence)
-                      for n in names for c in controllers}
+        references = {}
         tasks = []
         for key, name, controller, step, kind in planned:
             package = None
-            if HOSTS_BY_KEY[key].needs_ssp:
-                package = folder / f"{name}_{controller}_{step:g}.ssp"
+            host = HOSTS_BY_KEY[key]
+            full = stops.get(name) or scenarios.load(name).stop
+            stop = None if host.horizon(full, step) == full else host.horizon(full, step)
+            stop = stops.get(name) if stop is None else stop
+            if (name, controller, stop) not in references:
+                references[(name, controller, stop)] = converged_values(name, controller, stop, fmu_paths, convergence)
+            paths = native_paths if host.edition == "native" else fmu_paths
+            if host.needs_ssp:
+                interface = f"me{host.ssp_rtol:g}" if host.ssp_rtol else "cs"
+                package = folder / f"{name}_{controller}_{step:g}_{stop}_{interface}_{host.edition or 'selected'}.ssp"
                 if not package.exists():
-                    export_ssp(scenarios.configure(name, controller, step, stops.get(name)), package,
-                               fmu_paths=fmu_paths)
-            tasks.append((key, name, controller, step, stops.get(name), references[(name, controller)], fmu_paths,
+                    export_ssp(scenarios.configure(name, controller, step, stop), package,
+                               fmu_paths=paths, rtol=host.ssp_rtol)
+            tasks.append((key, name, controller, step, stop, references[(name, controller, stop)], paths,
                           package, kind))
         tasks.sort(key=lambda t: t[3])  # the finest steps (longest runs) first
         rows = parallel_map(host_row, tasks, jobs, description="host matrix", progress=None)
@@ -559,7 +643,15 @@ USER_NOTES = """## What a user of another FMI tool must know
 - **Warnings** (switch the FMU's logging on: pythonfmu drops every message otherwise): "initial error
   re-latched" = the host did not propagate initial values, the result is still right; "u chatters with
   communication step" = the step is too large for the host's coupling, the result is wrong: use a smaller
-  step or a feedthrough-aware master. The matrix lists what each host passed on."""
+  step or a feedthrough-aware master. The matrix lists what each host passed on.
+- **The step in an SSP**: `export-ssp` writes it in every annotation we know an engine reads: ours,
+  libcosim's (`osp:FixedStepAlgorithm`, which libcosim takes) and OpenModelica's (`oms:FixedStepMaster`,
+  which OMSimulator's C API `oms_importFile` takes). OMSimulator's Python API, fmpy's SSP simulator and
+  Ecos read none: set the step by hand (`setFixedStepSize`, `step_size=`); docs/other_hosts.md has the table.
+- **Model Exchange** (the native FMUs): no communication step. Our master integrates them with CVODE
+  (`--algorithm me`; docs/model_exchange.md); OMSimulator runs an `export-ssp --algorithm me` package
+  strongly coupled (its CVODE; FMI 2.0 only), first order in its maximum step, which is also its output
+  interval (here the scenario's step). Their rows are on the scenario's step as output grid."""
 
 
 def steps_for_hosts(convergence: dict) -> list:
@@ -607,6 +699,9 @@ def matrix_markdown(matrix: dict) -> str:
         host = HOSTS_BY_KEY[row["host"]]
         limit = validated_step(convergence, row["scenario"], row["controller"], host.family)
         step = f"{row['step']:g} ({row['step_kind']})"
+        full = matrix["stops"].get(row["scenario"]) or scenarios.load(row["scenario"]).stop
+        if host.max_steps and row["stop"] is not None and row["stop"] < full - 1e-12:
+            step += f", over {row['stop']:g} s ({host.max_steps} steps: its memory)"
         if row["status"] != "ok":
             lines.append(f"| {row['scenario']} | {host.name} (`{host.key}`) | {host.settings} | {step} | "
                          f"{row['status']}: {row.get('reason', '')} |||||")

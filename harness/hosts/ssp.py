@@ -5,10 +5,19 @@ The package is a zip file holding
 * ``SystemStructure.ssd``: one ``ssd:Component`` per instance with
   ``source="resources/<ModelIdentifier>.fmu"``, its connectors (the connected
   inputs, the connected and recorded outputs, all Real), the connections,
-  a ``ssd:DefaultExperiment`` (start, stop; the communication step is in an
-  annotation, SSP 1.0 has no attribute for it: ours, and libcosim's
-  ``osp:FixedStepAlgorithm`` with 0 worker threads) and, per component, a
+  a ``ssd:DefaultExperiment`` (start, stop) and, per component, a
   ``ssd:ParameterBinding`` to ``resources/<instance>.ssv``;
+* the communication step in every annotation the SSP engines we know read (SSP 1.0 has no
+  attribute for it; docs/hosts.md says which engine takes which): ours
+  (``org.afc-fmi.experiment`` in the DefaultExperiment), libcosim's
+  (``com.opensimulationplatform``: ``osp:FixedStepAlgorithm`` with 0 worker threads, in the
+  DefaultExperiment) and OpenModelica's (``org.openmodelica`` on the System:
+  ``oms:SimulationInformation`` / ``oms:FixedStepMaster stepSize``, which OMSimulator's C API
+  ``oms_importFile`` reads; its 3.0 Python API reads no step annotation: ``setFixedStepSize``);
+* with ``--algorithm me`` (native FMUs, which carry Model Exchange) the System's
+  ``org.openmodelica`` annotation instead declares one CVODE solver with the relative tolerance
+  ``--rtol`` and every component is assigned to it: OMSimulator's Python API then runs the
+  loop strongly coupled, integrating the FMUs' Model Exchange interface with CVODE (no step);
 * ``resources/<instance>.ssv``: an ``ssv:ParameterSet`` named
   ``initialValues`` with the scenario's parameter values of that instance
   (and the controller variant), written with full precision;
@@ -47,6 +56,7 @@ from .. import cli_args, variants
 from .. import scenario as scenarios
 from ..fmi import ModelInfo
 from ..master import resolve_fmu, simulate, validate
+from ..me_master import DEFAULT_RTOL, check_tolerances, model_exchange_info
 from ..scenario import Scenario, ScenarioError
 from ..studies.step_study import load_convergence, validated_step
 
@@ -55,6 +65,8 @@ NS_SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 NS_SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 NS_AFC = "https://afc-fmi.invalid/ssp/experiment"  # our annotation (step size), ignored by other tools
 NS_OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"  # libcosim's algorithm annotation
+NS_OMS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"  # OMSimulator's
+OMS_SOLVER = "cvode"  # the name of the one solver of an --algorithm me package
 PARAMETER_SET = "initialValues"
 ANNOTATION_TYPE = "org.afc-fmi.experiment"
 
@@ -111,8 +123,14 @@ def connectors(scenario: Scenario, infos: dict) -> dict:
     return result
 
 
-def system_structure(scenario: Scenario, infos: dict, sources: dict, name: str) -> str:
-    """The text of SystemStructure.ssd."""
+def _oms_annotation(indent: str, body: list) -> list:
+    return [f'{indent}<ssd:Annotations>', f'{indent}  <ssc:Annotation type="org.openmodelica">',
+            f'{indent}    <oms:Annotations xmlns:oms="{NS_OMS}">', *(f"{indent}      {line}" for line in body),
+            f"{indent}    </oms:Annotations>", f"{indent}  </ssc:Annotation>", f"{indent}</ssd:Annotations>"]
+
+
+def system_structure(scenario: Scenario, infos: dict, sources: dict, name: str, rtol: float | None = None) -> str:
+    """The text of SystemStructure.ssd; ``rtol``: an --algorithm me package (OMSimulator's CVODE solver)."""
     now = datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0).isoformat()
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<ssd:SystemStructureDescription xmlns:ssd="{NS_SSD}" xmlns:ssc="{NS_SSC}" xmlns:ssv="{NS_SSV}" '
@@ -131,6 +149,8 @@ def system_structure(scenario: Scenario, infos: dict, sources: dict, name: str) 
         lines.append(f'          <ssd:ParameterBinding type="application/x-ssp-parameter-set" '
                      f'source="resources/{escape(instance)}.ssv"/>')
         lines.append("        </ssd:ParameterBindings>")
+        if rtol is not None:  # OMSimulator: this component is integrated by the system's CVODE solver
+            lines += _oms_annotation("        ", [f'<oms:SimulationInformation name="{OMS_SOLVER}"/>'])
         lines.append("      </ssd:Component>")
     lines.append("    </ssd:Elements>")
     lines.append("    <ssd:Connections>")
@@ -139,6 +159,14 @@ def system_structure(scenario: Scenario, infos: dict, sources: dict, name: str) 
                      f'startConnector={quoteattr(c.source_variable)} endElement={quoteattr(c.target_instance)} '
                      f'endConnector={quoteattr(c.target_variable)}/>')
     lines.append("    </ssd:Connections>")
+    if rtol is None:  # OMSimulator's C API (oms_importFile) takes its co-simulation master's step from here
+        lines += _oms_annotation("    ", ["<oms:SimulationInformation>",
+                                        f'  <oms:FixedStepMaster description="oms-ma" '
+                                        f'stepSize="{_number(scenario.step)}"/>',
+                                        "</oms:SimulationInformation>"])
+    else:  # OMSimulator's Python API: one strongly coupled system, CVODE over the Model Exchange FMUs
+        lines += _oms_annotation("    ", [f'<oms:SimulationInformation name="{OMS_SOLVER}" method="cvode" '
+                                        f'tolerance="{_number(rtol)}"/>'])
     lines.append("  </ssd:System>")
     lines.append(f'  <ssd:DefaultExperiment startTime="{_number(scenario.start)}" stopTime="{_number(scenario.stop)}">')
     lines.append("    <ssd:Annotations>")
@@ -159,13 +187,19 @@ def system_structure(scenario: Scenario, infos: dict, sources: dict, name: str) 
     return "\n".join(lines)
 
 
-def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inputs: bool = True) -> Path:
-    """Write ``scenario`` (controller variant already set) as an SSP 1.0 package to ``out``."""
+def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inputs: bool = True,
+               rtol: float | None = None) -> Path:
+    """Write ``scenario`` (controller variant already set) as an SSP 1.0 package to ``out``; with ``rtol``
+    an --algorithm me package (every FMU must carry Model Exchange: one clear error names one that does not)."""
     if fmu_paths is None:
         fmu_paths = build_fmu.ensure_built()
     out = Path(out)
     paths = {name: resolve_fmu(spec.fmu, scenario, fmu_paths) for name, spec in scenario.components.items()}
     infos = {name: ModelInfo.read(path) for name, path in paths.items()}
+    if rtol is not None:
+        check_tolerances(rtol, None)
+        for name, path in paths.items():
+            model_exchange_info(name, path)
     validate(scenario, infos)
     sources = {name: f"resources/{infos[name].model_identifier}.fmu" for name in scenario.components}
     parameters = {name: dict(spec.parameters) for name, spec in scenario.components.items()}
@@ -178,7 +212,7 @@ def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inp
     name = f"{scenario.name}_{controller}"
     out.parent.mkdir(parents=True, exist_ok=True)
     with zipfile.ZipFile(out, "w", compression=zipfile.ZIP_DEFLATED) as package:
-        package.writestr("SystemStructure.ssd", system_structure(scenario, infos, sources, name))
+        package.writestr("SystemStructure.ssd", system_structure(scenario, infos, sources, name, rtol))
         for instance in scenario.components:
             description = f"{scenario.name}: parameters of {instance}"
             if start_inputs:
@@ -195,7 +229,10 @@ def export_command(args) -> int:
     overrides = list(args.set or [])
     cli_args.check_assignments(scenarios.load(args.scenario), overrides)
     step, note = args.step, ""
-    if step is None:  # the step a host that delays every link (Jacobi) needs for 1 %
+    me = args.algorithm == "me"
+    if me:  # no communication step: the scenario's step is the output interval
+        note = f"; Model Exchange: OMSimulator's CVODE at rtol {args.rtol:g} over every FMU"
+    elif step is None:  # the step a host that delays every link (Jacobi) needs for 1 %
         step = validated_step(load_convergence(), scenarios.load(args.scenario).name, args.controller, "jacobi")
         note = (f"; step {step:g} s, the Jacobi validated step (1 %) of docs/convergence.md" if step else
                 "; no Jacobi validated step in the study: the scenario's step")
@@ -203,7 +240,7 @@ def export_command(args) -> int:
     out = args.out or str(Path("results") / f"{scenario.name}_{args.controller}.ssp")
     for scenario_note in scenario.notes:  # e.g. the stop moved to a whole number of steps
         print(f"note: {scenario_note}", file=sys.stderr)
-    path = export_ssp(scenario, out, start_inputs=args.start_inputs)
+    path = export_ssp(scenario, out, start_inputs=args.start_inputs, rtol=args.rtol if me else None)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB): {', '.join(scenario.components)}; "
           f"parameter set '{PARAMETER_SET}'"
           + ("; connected inputs start at their consistent initial values" if args.start_inputs else "") + note)
@@ -222,6 +259,12 @@ def register(commands):
     export.add_argument("--stop", type=cli_args.positive_float, help="stop time of the default experiment (default: the scenario's)")
     export.add_argument("--set", action="append", metavar="INSTANCE.PARAMETER=VALUE", type=cli_args.assignment,
                         help="override a parameter value (repeatable), e.g. controller.gamma=290")
+    export.add_argument("--algorithm", choices=("co-simulation", "me"), default="co-simulation",
+                        help="co-simulation (default): the step in every engine's annotation; me: the native FMUs' "
+                             "Model Exchange, integrated by OMSimulator's CVODE (its org.openmodelica solver "
+                             "annotation; --edition native)")
+    export.add_argument("--rtol", type=cli_args.positive_float, default=DEFAULT_RTOL,
+                        help=f"--algorithm me: CVODE's relative tolerance (default {DEFAULT_RTOL:g})")
     export.add_argument("--start-inputs", action=argparse.BooleanOptionalAction, default=True,
                         help="also set the start values of the connected inputs to the consistent initial values "
                              "(needed by engines that start connectors at 0, e.g. fmpy's SSP simulator; default on)")

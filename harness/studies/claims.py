@@ -48,6 +48,7 @@ ALL_SCENARIOS = (*PENDULUM, "manipulator")
 DISTURBANCE_TOLERANCE = 0.10  # "barely changes": ITAE and IAE within 10 % of case 1
 SMOOTHNESS_TOLERANCE = 1.10  # "smooth": tv_u at most 10 % above the smoothest comparison controller
 GRID_QUANTISED = ("ts",)  # scores read off the communication grid: error at least one step
+TOLERANCE_FACTOR = 10.0  # --algorithm me: the ladder's rungs are rtol and 10 rtol (no step to halve)
 CLOSE_MARGIN = 0.01  # a comparison decided by a gap under 1 % of the values is reported as close
 
 BELOW, ABOVE, OPEN = "below", "above", "open"
@@ -81,17 +82,23 @@ def plus_minus(value: float, error: float) -> str:
 
 
 def estimate(ladder: list, metric: str) -> Estimate | None:
-    """The score ``metric`` of one (scenario, controller) from its runs at halving steps.
+    """The score ``metric`` of one (scenario, controller) from its runs at halving steps (or, Model
+    Exchange rows with an ``rtol``, at tolerances TOLERANCE_FACTOR apart).
 
     ``ladder`` holds outcome rows (``step``, ``status`` and the scores), in any order.
     None when the finest run failed; an infinite error when it has no coarser ok
     neighbour at twice its step.
     """
-    runs = sorted(ladder, key=lambda o: o["step"])
+    tolerances = bool(ladder) and all(o.get("rtol") for o in ladder)  # a Model Exchange ladder (--algorithm me)
+    runs = sorted(ladder, key=lambda o: o["rtol"] if tolerances else o["step"])
     if not runs or runs[0]["status"] != "ok" or runs[0].get(metric) is None:
         return None
     finest = runs[0]
-    coarser = next((o for o in runs[1:] if math.isclose(o["step"], 2 * finest["step"], rel_tol=1e-9)), None)
+    if tolerances:  # the same run at a TOLERANCE_FACTOR looser rtol: its change bounds the error left
+        coarser = next((o for o in runs[1:] if math.isclose(o["rtol"], TOLERANCE_FACTOR * finest["rtol"],
+                                                            rel_tol=1e-9)), None)
+    else:
+        coarser = next((o for o in runs[1:] if math.isclose(o["step"], 2 * finest["step"], rel_tol=1e-9)), None)
     if coarser is None or coarser["status"] != "ok" or coarser.get(metric) is None:
         error = math.inf
     else:
