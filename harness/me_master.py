@@ -52,8 +52,8 @@ from .scenario import Scenario, ScenarioError
 
 ALGORITHM = "me"
 INTEGRATOR = "CVODE BDF (SUNDIALS, dense difference-quotient Jacobian)"
-#: ITAE, IAE, Ec within 0.003 % of the converged co-simulation in all 13 cases at this tolerance; at 1e-8 the
-#: motor arm is 0.06 % off (docs/model_exchange_accuracy.md), and 1e-10 costs 10-20 % more CPU than 1e-8
+#: ITAE, IAE, Ec within 0.004 % of the converged co-simulation in all 13 cases at this tolerance; at 1e-8 the
+#: motor arm is 0.06 % off (docs/model_exchange_accuracy.md), and 1e-10 costs 30-80 % more CPU than 1e-8
 DEFAULT_RTOL = 1e-10
 MAX_EVENT_PASSES = 100  # event iteration: passes before the master gives up (a model that never settles)
 _DOUBLE = ctypes.sizeof(ctypes.c_double)

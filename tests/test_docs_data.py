@@ -461,8 +461,10 @@ def test_the_model_exchange_verdicts_quoted_are_those_tables_me_decides(model_ex
     (me_vud, me_fixed), (cs_vud, cs_fixed) = manipulator(me), manipulator(cs)
     for name in ("README.md", "docs/studies.md", "docs/model_exchange.md"):
         text = flat(page(name))
-        vud, fixed = re.search(r"TV\(u\)/s (?:vud )?([\d.]+) against ([\d.]+), 1\.1 x that of", text).groups()
+        vud, fixed = re.search(r"TV\(u\)/s (?:vud )?(?:is )?([\d.]+) against ([\d.]+), 1\.1 x that of", text).groups()
         assert agrees(vud, me_vud) and agrees(fixed, me_fixed), (name, vud, fixed, me_vud, me_fixed)
+        above = re.search(r"still (\d+) % above fixed's", text).group(1)  # vud's TV(u)/s against fixed's own
+        assert int(above) == round(100 * (me_vud / (me_fixed / 1.1) - 1)), (name, above)
     text = flat(page("docs/model_exchange.md"))
     vud, fixed = re.search(r"do not \(([\d.]+) against ([\d.]+)\)", text).groups()
     assert agrees(vud, cs_vud) and agrees(fixed, cs_fixed), (vud, fixed, cs_vud, cs_fixed)

@@ -680,13 +680,15 @@ def matrix_markdown(matrix: dict) -> str:
              "communication step and compares ITAE, IAE and Ec with our converged result over the same horizon "
              "(harness/studies/step_study.py; within 1 % = **ok**; results/hosts/hosts.json keeps every warning's text). "
              "*validated* is the validated step (1 %) of "
-             "docs/convergence.md for the host's scheme (our feedthrough master, or Jacobi for every other host); "
+             "docs/convergence.md for the host's scheme and the row's controller (our feedthrough master's for ours and "
+             "for OMSimulator's co-simulation master, which respects direct feedthrough; Jacobi for every other "
+             "co-simulation host; a Model Exchange row has no step: the scenario's step is its output grid); "
              "*scenario* is the scenario's own step (Table I/II). Warnings are the FMU's log messages with status "
              "Warning, and where the host gives them to us.", "",
              "```bash",
              "pip install -e '.[hosts]'      # ecospy, tbb, libcosimpy, fmu-manipulation-toolbox (fmpy: always)",
              "python -m harness hosts pendulum_case1 manipulator --stop manipulator=5   # results/hosts/",
-             "python -m harness hosts --host ecos libcosim-api --steps validated --apply  # also docs/hosts.md",
+             "python -m harness hosts --host ecos libcosim-api --steps validated  # results/hosts/ only: --apply on a full run",
              "```", ""]
     lines += [USER_NOTES, ""] + steps_for_hosts(convergence) + [""]
     for host in HOSTS:

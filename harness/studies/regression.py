@@ -523,8 +523,9 @@ def regress_command(args) -> int:
         print(f"JUnit XML: {outcome.junit}")
     if any("no reference" in c.message for c in outcome.comparisons):
         where = f" --references {args.references}" if args.references else ""
+        me = "--algorithm me --edition native " if args.algorithm == "me" else ""
         print(f"missing references: create them with `python -m harness regress {' '.join(args.scenarios or [])}"
-              f"{' ' if args.scenarios else ''}--update{where}`", file=sys.stderr)
+              f"{' ' if args.scenarios else ''}{me}--update{where}`", file=sys.stderr)
     return 0 if outcome.passed else 1
 
 
