@@ -184,8 +184,10 @@ class Component:
             raise
         return self
 
-    def _instantiate2(self, logging_on: bool):
-        self.slave = self._call("loading the FMU's shared library", lambda: FMU2Slave(
+    def _load_and_instantiate2(self, fmu_class, logging_on: bool):
+        """Load the shared library as ``fmu_class`` (fmpy's FMU2Slave or FMU2Model) and fmi2Instantiate it
+        with our logger."""
+        self.slave = self._call("loading the FMU's shared library", lambda: fmu_class(
             guid=self.info.guid, unzipDirectory=self.unzip_dir,
             modelIdentifier=self.info.model_identifier, instanceName=self.name))
         callbacks = fmi2CallbackFunctions()
@@ -194,6 +196,9 @@ class Component:
         callbacks.freeMemory = _fmpy_default_callbacks.freeMemory
         self._callbacks = callbacks  # keep alive while the instance lives
         self._call("fmi2Instantiate", lambda: self.slave.instantiate(callbacks=callbacks, loggingOn=logging_on))
+
+    def _instantiate2(self, logging_on: bool):
+        self._load_and_instantiate2(FMU2Slave, logging_on)
         functions = self.slave._functions
         self._raw_set_real = functions["fmi2SetReal"]
         self._raw_get_real = functions["fmi2GetReal"]
@@ -357,15 +362,7 @@ class ModelExchangeComponent(Component):
     """
 
     def _instantiate2(self, logging_on: bool):
-        self.slave = self._call("loading the FMU's shared library", lambda: FMU2Model(
-            guid=self.info.guid, unzipDirectory=self.unzip_dir,
-            modelIdentifier=self.info.model_identifier, instanceName=self.name))
-        callbacks = fmi2CallbackFunctions()
-        callbacks.logger = fmi2CallbackLoggerTYPE(self._log_message)
-        callbacks.allocateMemory = _fmpy_default_callbacks.allocateMemory
-        callbacks.freeMemory = _fmpy_default_callbacks.freeMemory
-        self._callbacks = callbacks
-        self._call("fmi2Instantiate", lambda: self.slave.instantiate(callbacks=callbacks, loggingOn=logging_on))
+        self._load_and_instantiate2(FMU2Model, logging_on)
         self._bind(2)
 
     def _instantiate3(self, logging_on: bool):
