@@ -26,8 +26,8 @@ import pytest
 import build_native
 import c_toolchain
 from tests import me_helpers as me
-from tests.test_build_native_windows import (DEFAULT_PREFIX, run_with_files, scaled_difference, wine,  # noqa: F401
-                                       wine_program)
+from tests.test_build_native_windows import (DEFAULT_PREFIX, native, run_with_files,  # noqa: F401 - fixtures
+                                             scaled_difference, wine, wine_program)
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE = ROOT / "tests" / "c_host" / "me_host.c"
@@ -54,15 +54,6 @@ def _inputs(model: str, t: float) -> dict:
 
 PARAMETERS = {"InvertedPendulum": {"dist_gain": 1.0}, "AdaptiveFuzzyController": {"variant": 3},
               "Manipulator": {"x1_start": 0.0, "x2_start": 0.0}}
-
-
-@pytest.fixture(scope="module")
-def native():
-    platforms = os.environ.get("AFC_NATIVE_PLATFORMS", "")
-    chosen = tuple(p for p in platforms.split(",") if p) or build_native.PLATFORMS
-    if not {"linux64", "win64"} <= set(chosen):
-        pytest.skip(f"AFC_NATIVE_PLATFORMS={platforms} does not build both linux64 and win64")
-    return build_native.ensure_built()
 
 
 def _build(target: str, name: str, *extra: str) -> Path:
