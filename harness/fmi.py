@@ -7,7 +7,8 @@ raises ``FMICallException`` on a status >= error); the per-step calls
 (``real_reader``, ``real_writer``, ``stepper``) are fmpy's raw ctypes functions
 bound once to the instance and to value-reference and value arrays prepared
 once; they return the FMI status so the caller decides, without allocation
-or exceptions per step.
+or exceptions per step.  :func:`extracted_fmu` reads and extracts an FMU once
+per process for callers that run the same FMUs many times.
 """
 from __future__ import annotations
 
