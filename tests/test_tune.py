@@ -1,6 +1,6 @@
 """`python -m harness tune` (docs/tuning.md): search space, pruning, database, results.
 
-Short horizons and few trials: the whole file stays within about a minute.
+Short horizons and few trials keep the file quick.
 """
 import dataclasses
 import hashlib

@@ -14,7 +14,10 @@ each ``(scenario, fmu_paths, package) -> (Trajectory, warnings, where the warnin
 
 Warnings are the FMU log messages with status Warning: from the logger callback where the host
 takes one (our master, the plain fmpy script, the container run by fmpy, which forwards its
-embedded FMUs' messages), else from what the host prints (harness/hosts/console_capture.py).
+embedded FMUs' messages), else from what the host prints (libcosim logs them as ``[FMI
+status=warning, ...]`` at log level warning): the run captures the process's stdout and stderr and
+keeps the lines that say warning (harness/hosts/console_capture.py).  fmpy.ssp and Ecos pass none
+of them on (``NOT_CAPTURED``): pythonfmu drops every message of an FMU instantiated with logging off.
 """
 from __future__ import annotations
 

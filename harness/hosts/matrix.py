@@ -1,9 +1,20 @@
 """The host matrix: ``python -m harness hosts`` runs the closed loops in every FMI host this machine has.
 
-Each row is one scenario x controller x host x step (harness/hosts/matrix_row.py), scored the same
-way for every host and compared with our converged result over the same horizon.  The hosts are the
-rows of the host registry (harness/hosts/host_registry.py), each with the runner that runs it
-(harness/hosts/host_runners.py); docs/hosts.md is written by harness/hosts/matrix_report.py.
+Each row is one scenario x controller x host x step, scored the same way for every host and
+compared with our converged result over the same horizon.  One idea per module, each importing only
+those above it (harness/hosts/):
+
+===================  ===================================================================
+``trajectory``       what every host yields, scored the same way for every host
+``console_capture``  the warnings of a host that prints them (stdout and stderr captured)
+``plain_fmpy``       the plain fmpy script: Jacobi or Gauss-Seidel, no initial-value propagation
+``host_runners``     one function per host that runs the closed loop in it
+``host_registry``    one ``Host`` row per host: its runner, what it needs, whether it can run here
+``matrix_row``       one row: run, score, compare with our converged values; its verdict
+``matrix_prose``     the prose of docs/hosts.md
+``matrix_report``    docs/hosts.md from a matrix
+``matrix``           the rows planned and run in parallel; the ``hosts`` command
+===================  ===================================================================
 
 Nothing the repository tracks is written unless asked: the matrix goes to
 ``results/hosts/`` (``--out``); ``--apply`` also writes docs/hosts.md.
