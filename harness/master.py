@@ -271,7 +271,7 @@ class Master:
     def __init__(self, scenario: Scenario, algorithm: str = "feedthrough", fmu_paths: dict | None = None,
                  logging_on: bool = True, loop: str = "auto", prepared: dict | None = None):
         """``prepared``: {FMU path: (ModelInfo, folder it is extracted to)} kept by the caller for FMUs
-        it runs many times (harness/studies/tune.py); other FMUs are read and extracted per run."""
+        it runs many times (harness/studies/tune/); other FMUs are read and extracted per run."""
         if algorithm not in ALGORITHMS:
             raise ScenarioError(f"unknown algorithm {algorithm!r}; valid: {', '.join(ALGORITHMS)}")
         self.scenario, self.algorithm = scenario, algorithm

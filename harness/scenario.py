@@ -12,7 +12,7 @@ file against it (an unknown table or key with its close match, a missing key, a 
 type or out of range: one line naming the file, the table and the key), and the table of scenario
 keys in docs/master.md is generated from it (:func:`keys_markdown`, ``python build_fmu.py --docs``).
 Names that only the FMUs know (parameters, variables) are checked against their model
-descriptions by harness/master.py.
+descriptions by harness/master.py.  harness/scenario_toml.py writes a scenario back as such a file.
 """
 from __future__ import annotations
 

@@ -50,9 +50,9 @@ def pytest_sessionstart(session):
 
 
 def pytest_sessionfinish(session):
-    host = sys.modules.get("tests.plain_fmpy_host")
-    if host is not None:
-        host.remove_extractions()
+    fmi = sys.modules.get("harness.fmi")  # the FMUs it extracted once for the session (harness/fmi.py: extracted_fmu)
+    if fmi is not None:
+        fmi.release_extractions()
 
 
 def pytest_terminal_summary(terminalreporter):

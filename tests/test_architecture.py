@@ -11,6 +11,9 @@ Rules (docs/architecture.md draws them):
   registers every subcommand), and no study imports a host runner;
 * the harness's top level holds the core only (studies in harness/studies/, host runners in
   harness/hosts/);
+* a chain of modules (``CHAINS``: the tune study's sub-package, the host matrix's modules) reads
+  from the bottom up: each module imports only the chain's modules before it, and a new module of
+  harness/studies/tune/ takes its place in the chain;
 * ``build_native`` never reaches ``build_fmu`` (``build_fmu`` may import ``build_native``), and
   the masters' compiled loops reach no FMU build and no FMU source: ``harness.master_loop`` and
   ``harness.me_loop`` import only the C toolchain helper (and the core beside them), which imports
@@ -32,11 +35,21 @@ PACKAGES = ("harness", "plants", "fmu_src")
 #: the co-simulation core at the top of harness/ (docs/architecture.md); anything else goes in a sub-package
 CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harness.scenario", "harness.variants",
         "harness.fmi", "harness.master", "harness.master_loop", "harness.scores", "harness.cases",
-        "harness.units", "harness.me_master", "harness.me_loop", "harness.cvode"}
+        "harness.units", "harness.me_master", "harness.me_loop", "harness.cvode", "harness.scenario_toml"}
 COMPOSITION_ROOT = "harness.cli"
 STUDIES, HOSTS = "harness.studies", "harness.hosts"
 #: what the master's compiled loop may never reach, directly or through other modules
 LOOP_FORBIDDEN = ("build_native", "build_fmu", "fmu_catalog", "plants", "fmu_src")
+#: modules of one idea each that build on one another: each imports only those before it in its chain
+#: (harness/studies/tune/__init__.py and harness/hosts/matrix.py say what each holds)
+CHAINS = {
+    "harness.studies.tune": ("errors", "space", "objective", "candidate", "config", "storage", "loop",
+                             "scenario_file", "summary", "report", "comparison", "study", "command_line"),
+    "harness.hosts": ("trajectory", "console_capture", "plain_fmpy", "host_runners", "host_registry", "matrix_row",
+                      "matrix_prose", "matrix_report", "matrix"),
+}
+#: packages whose every module is in their chain (harness/hosts/ holds other hosts' bindings beside its chain)
+WHOLE_CHAINS = ("harness.studies.tune",)
 
 
 @dataclass(frozen=True)
@@ -182,6 +195,25 @@ def _layer(module: str) -> str:
 WRONG_WAY = {("core", "studies"), ("core", "hosts"), ("studies", "hosts")}
 
 
+def chain_problems(files: dict, imports, root: Path) -> list:
+    """Imports that go up a chain of ``CHAINS``; modules of a ``WHOLE_CHAINS`` package outside its chain."""
+    problems = []
+    for package, chain in CHAINS.items():
+        position = {f"{package}.{name}": index for index, name in enumerate(chain)}
+        for i in imports:
+            if i.source in position and i.target in position and position[i.target] >= position[i.source]:
+                problems.append(f"{files[i.source].relative_to(root)}:{i.line}: {i.source} imports {i.target}, "
+                                f"which comes after it in the chain of {package} ({', '.join(chain)}): a module "
+                                "imports only those before it")
+        if package in WHOLE_CHAINS:
+            for name in sorted(files):
+                if name.startswith(package + ".") and name not in position:
+                    problems.append(f"{files[name].relative_to(root)}: {name} is not in the chain of {package}: "
+                                    "give it its place in CHAINS (tests/test_architecture.py) and in the package's "
+                                    "text")
+    return problems
+
+
 def violations(root: Path = ROOT) -> list:
     """Every broken rule, one line each (empty: the architecture holds)."""
     files = project_files(root)
@@ -209,6 +241,7 @@ def violations(root: Path = ROOT) -> list:
             if hits:
                 problems.append(f"{loop} reaches {', '.join(hits)}: the compiled loop needs only "
                                 "c_toolchain")
+    problems += chain_problems(files, imports, root)
     if "c_toolchain" in files:
         own = sorted({i.target for i in imports if i.source == "c_toolchain"})
         if own:
@@ -229,6 +262,8 @@ def test_the_graph_sees_the_imports_it_must_see():
     assert ("build_fmu", "build_native") in imports
     assert ("harness.cli", "harness.studies.tables") in imports
     assert ("harness.hosts.matrix", "harness.studies.step_study") in imports
+    assert ("harness.studies.tune.study", "harness.studies.tune.loop") in imports
+    assert ("harness.hosts.host_registry", "harness.hosts.host_runners") in imports
 
 
 # ------------------------------------------------------- each rule on a tree that breaks it
@@ -237,7 +272,7 @@ def _tree(root: Path, files: dict) -> Path:
         path = root / name
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text)
-    for package in ("harness", "harness/studies", "harness/hosts", "plants", "fmu_src"):
+    for package in ("harness", "harness/studies", "harness/studies/tune", "harness/hosts", "plants", "fmu_src"):
         (root / package).mkdir(parents=True, exist_ok=True)
         (root / package / "__init__.py").touch()
     return root
@@ -248,7 +283,14 @@ GOOD = {"harness/scenario.py": "import math\n",
         "harness/master_loop.py": "import c_toolchain\n",
         "harness/cli.py": "from .studies import tables\nfrom .hosts import matrix\n",
         "harness/studies/tables.py": "from .. import master\n",
-        "harness/hosts/matrix.py": "from ..studies.tables import master\n\n\ndef f():\n    import numpy\n",
+        "harness/hosts/matrix.py": "from ..studies.tables import master\nfrom . import matrix_report\n\n\n"
+                                   "def f():\n    import numpy\n",
+        "harness/hosts/matrix_report.py": "from .matrix_row import within\n",
+        "harness/hosts/matrix_row.py": "import math\n",
+        "harness/hosts/engines.py": "from .matrix import f\n",
+        "harness/studies/tune/space.py": "from .errors import TuneError\n",
+        "harness/studies/tune/errors.py": "from ... import cli_args\n",
+        "harness/studies/tune/command_line.py": "from .space import x\nfrom .errors import y\n",
         "c_toolchain.py": "import os\n",
         "build_native.py": "import c_toolchain\nimport fmu_catalog\n",
         "build_fmu.py": "import build_native\nimport fmu_catalog\n",
@@ -276,6 +318,14 @@ def test_a_tree_that_keeps_the_rules_passes(tmp_path):
     ("harness/master_loop.py", "import build_native\n", "harness.master_loop reaches build_native"),
     ("c_toolchain.py", "import fmu_catalog\n", "c_toolchain imports project modules fmu_catalog"),
     ("harness/sweep.py", "import math\n", "harness/sweep.py: not part of the co-simulation core"),
+    ("harness/studies/tune/errors.py", "from .space import x\n",
+     "harness.studies.tune.errors imports harness.studies.tune.space, which comes after it in the chain"),
+    ("harness/studies/tune/space.py", "from .errors import x\nfrom .command_line import y\n",
+     "harness.studies.tune.space imports harness.studies.tune.command_line, which comes after it"),
+    ("harness/hosts/matrix_row.py", "from .matrix_report import percent\n",
+     "harness.hosts.matrix_row imports harness.hosts.matrix_report, which comes after it in the chain"),
+    ("harness/studies/tune/helpers.py", "import math\n",
+     "harness.studies.tune.helpers is not in the chain of harness.studies.tune"),
 ])
 def test_each_rule_fails_on_a_tree_that_breaks_it(tmp_path, file, text, expected):
     problems = violations(_tree(tmp_path, {**GOOD, file: text}))

@@ -1,10 +1,11 @@
-"""The controller FMU in hosts other than our master (issue 13, docs/host_robustness.md).
+"""The controller FMU in hosts other than our master (docs/host_robustness.md).
 
-A plain fmpy host (tests/plain_fmpy_host.py: no initial-value propagation, Jacobi or
-Gauss-Seidel in any order) must give the scores of our master's converged run within 1 %,
-with one Warning naming the re-latch; our master (which propagates initial values) must give
-no warning; u chatter at a step too large for Jacobi must give one Warning, converged runs none.
-Horizons are short (2 s or less, the transient the initial error shapes) to keep CI fast.
+A plain fmpy host (harness/hosts/plain_fmpy.py, the host matrix's fmpy-jacobi and fmpy-gs-*: no
+initial-value propagation, Jacobi or Gauss-Seidel in any order) must give the scores of our
+master's converged run within 1 %, with one Warning naming the re-latch; our master (which
+propagates initial values) must give no warning; u chatter at a step too large for Jacobi must
+give one Warning, converged runs none.  Horizons are short (2 s or less, the transient the
+initial error shapes) to keep CI fast.
 """
 import itertools
 
@@ -13,9 +14,9 @@ import pytest
 from fmu_src import chatter_monitor
 from harness import fmi
 from harness import scenario as scenarios
+from harness.hosts import plain_fmpy
 from harness.master import simulate
 from harness.scores import score_run
-from tests import plain_fmpy_host
 from tests.fmu_helpers import Driven
 
 WARNING = 1  # fmi2Warning
@@ -44,14 +45,18 @@ def assert_close(scores, reference):
         assert abs(scores[key] / reference[key] - 1) < ACCURACY, (key, scores[key], reference[key])
 
 
-def plain_run(fmu_paths, name, algorithm, order=(), step=1e-4, stop=HORIZON, **controller):
-    scenario = scenarios.configure(name, "vud")
-    return plain_fmpy_host.run(scenario, fmu_paths, algorithm, order, stop=stop, step=step,
-                               overrides={"controller": controller})
+def plain_run(fmu_paths, name, order=None, step=1e-4, stop=HORIZON, **controller):
+    """The plain fmpy host: Jacobi (``order`` None) or Gauss-Seidel in ``order``; its scores and
+    {instance: [(status, message), ...]}."""
+    scenario = scenarios.configure(name, "vud", step, stop)
+    scenario.components["controller"].parameters.update(controller)
+    trajectory, messages = plain_fmpy.run(scenario, fmu_paths, order)
+    return {"scores": trajectory.scores(),
+            "messages": {n: [(status, text) for i, status, text in messages if i == n] for n in scenario.components}}
 
 
 def test_plain_jacobi_without_propagation_gets_the_converged_result(fmu_paths, converged):
-    run = plain_run(fmu_paths, "pendulum_case1", "jacobi")
+    run = plain_run(fmu_paths, "pendulum_case1")
     assert_close(run["scores"], converged["pendulum_case1"])
     (warning,) = warnings_of(run["messages"])
     assert "re-latched" in warning and "rejected e = 0, de = 0 at t = 0 " in warning
@@ -61,14 +66,14 @@ def test_plain_jacobi_without_propagation_gets_the_converged_result(fmu_paths, c
 
 @pytest.mark.parametrize("order", list(itertools.permutations(("controller", "plant", "reference"))))
 def test_plain_gauss_seidel_in_every_order_gets_the_converged_result(fmu_paths, converged, order):
-    run = plain_run(fmu_paths, "pendulum_case1", "gauss_seidel", order)
+    run = plain_run(fmu_paths, "pendulum_case1", order)
     assert_close(run["scores"], converged["pendulum_case1"])
     (warning,) = warnings_of(run["messages"])
     assert "rejected e = 0, de = 0 at t = 0 " in warning
 
 
 def test_plain_jacobi_manipulator_gets_the_converged_result(fmu_paths, converged):
-    run = plain_run(fmu_paths, "manipulator", "jacobi", step=2.5e-5, stop=MANIPULATOR_HORIZON)
+    run = plain_run(fmu_paths, "manipulator", step=2.5e-5, stop=MANIPULATOR_HORIZON)
     assert_close(run["scores"], converged["manipulator"])
     assert len(warnings_of(run["messages"])) == 1
 
@@ -77,7 +82,7 @@ def test_pinned_initial_error_is_used_without_warning(fmu_paths, converged):
     scenario = scenarios.configure("pendulum_case1", "vud")
     x1 = scenario.components["plant"].parameters["x1_start"]
     amplitude = scenario.components["reference"].parameters["amplitude"]
-    run = plain_run(fmu_paths, "pendulum_case1", "jacobi", initial_error=2, e0=-x1, de0=amplitude)
+    run = plain_run(fmu_paths, "pendulum_case1", initial_error=2, e0=-x1, de0=amplitude)
     assert_close(run["scores"], converged["pendulum_case1"])
     assert warnings_of(run["messages"]) == []
 
@@ -239,7 +244,8 @@ def test_no_warning_in_our_masters_converged_runs(fmu_paths, master_logs):
 
 @pytest.mark.parametrize("step,stop", [(4e-4, 6.0), (2e-4, 18.5)])
 def test_chatter_in_jacobi_warns_once(fmu_paths, master_logs, step, stop):
-    """pendulum case 1 vud in Jacobi: chatter sets in near 4.8 s (0.4 ms) and 17.7 s (0.2 ms)."""
+    """pendulum case 1 vud in Jacobi: the horizons reach past the onset of chatter at each step
+    (docs/host_robustness.md gives when it sets in)."""
     simulate(scenarios.configure("pendulum_case1", "vud", step, stop), "jacobi", fmu_paths)
     warnings = [line for name, line in master_logs if line.startswith("[WARNING]") and "chatters" in line]
     assert len(warnings) == 1

@@ -1,17 +1,23 @@
-"""Nothing left behind in the temporary directory (issue 14, item 4).
+"""Nothing left behind in the temporary directory.
 
 Each test points the temporary directory (Python's ``tempfile`` and ``TMPDIR``, which
 fmpy, Ecos and spawned workers use) at an empty folder of its own, runs a representative
 piece of work and checks that the folder is empty again: a master run, a failed
-instantiation, a run whose FMU rejects a parameter, an Ecos run, the tests' Driven helper.
+instantiation, a run whose FMU rejects a parameter, an Ecos run, the tests' Driven helper, the
+FMUs extracted once per process.
 """
 import dataclasses
 import gc
 import os
+import shutil
+import subprocess
+import sys
 import tempfile
+from pathlib import Path
 
 import pytest
 
+from harness import fmi
 from harness import scenario as scenarios
 from harness.cases import Case, run_case
 from harness.fmi import Component, FmiError, ModelInfo
@@ -80,3 +86,29 @@ def test_the_driven_helper_removes_its_extraction(fmu_paths, temp_dir):
     del forgotten
     gc.collect()
     assert left_in(temp_dir) == []
+
+
+def test_fmus_extracted_once_per_process_are_shared_renewed_and_removed(fmu_paths, temp_dir, tmp_path, monkeypatch):
+    """harness/fmi.py's extracted_fmu: one folder per FMU file and process, a new one when the file
+    changes, none left after release_extractions; the first call removes what a killed process left."""
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    killed = temp_dir / f"{fmi.EXTRACTION_PREFIX}{int(ended.stdout)}-TrackingReference-x"
+    running = temp_dir / f"{fmi.EXTRACTION_PREFIX}{os.getppid()}-TrackingReference-y"
+    for folder in (killed, running):
+        folder.mkdir()
+    monkeypatch.setattr(fmi, "_RELEASE_AT_EXIT", [])  # as in a new process: its first call sweeps
+    path = Path(shutil.copy(fmu_paths["TrackingReference"], tmp_path / "TrackingReference.fmu"))
+    info, folder = fmi.extracted_fmu(path)
+    assert not killed.exists() and running.exists()
+    assert info.model_identifier == "TrackingReference" and (Path(folder) / "modelDescription.xml").is_file()
+    again, same = fmi.extracted_fmu(path)
+    assert again is info and same == folder
+    component = Component("reference", info).instantiate(extracted=folder)
+    component.free()
+    assert Path(folder).is_dir()  # a shared extraction outlives the instances that use it
+    stamp = path.stat()
+    os.utime(path, ns=(stamp.st_atime_ns, stamp.st_mtime_ns + 10 ** 9))  # the FMU rebuilt
+    _, renewed = fmi.extracted_fmu(path)
+    assert renewed != folder and not Path(folder).exists()
+    fmi.release_extractions()
+    assert left_in(temp_dir) == [running.name]

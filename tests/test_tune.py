@@ -1,6 +1,6 @@
-"""`python -m harness tune` (issue 25, docs/tuning.md): search space, pruning, database, results.
+"""`python -m harness tune` (docs/tuning.md): search space, pruning, database, results.
 
-Short horizons and few trials: the whole file stays within about a minute.
+Short horizons and few trials keep the file quick.
 """
 import dataclasses
 import hashlib
@@ -24,7 +24,10 @@ import fmu_catalog  # noqa: E402
 from harness import scenario as scenarios  # noqa: E402
 from harness import variants  # noqa: E402
 from harness.cli import main as cli_main  # noqa: E402
-from harness.studies import tune  # noqa: E402
+from harness.scenario_toml import scenario_toml  # noqa: E402
+from harness.studies.tune import candidate, comparison, config as tune_config, space, storage  # noqa: E402
+from harness.studies.tune import tune  # noqa: E402
+from harness.studies.tune.summary import pareto_front  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTROLLER = "AdaptiveFuzzyController"
@@ -46,7 +49,7 @@ def config(tmp_path, paths, edition, **changes):
     base = dict(scenario="pendulum_case1", controller="vud", trials=4, stop=0.3, jobs=1, edition=edition,
                 out=tmp_path, fmu_paths=paths, held_out=())
     base.update(changes)
-    return tune.TuneConfig(**base)
+    return tune_config.TuneConfig(**base)
 
 
 def trials_of(url, name):
@@ -56,20 +59,20 @@ def trials_of(url, name):
 
 # ------------------------------------------------------------------ search space
 def test_the_search_space_is_the_fmus_table_per_variant_and_order():
-    names = {(c, n): [d.name for d in tune.search_space(v, n)]
+    names = {(c, n): [d.name for d in space.search_space(v, n)]
              for c, v in variants.CONTROLLER_VARIANTS.items() for n in (2, 3)}
     assert names[("vud", 2)] == ["k1", "k2", "q1", "q2", "gamma", "m_theta", "delta", "lambda_e", "1-lambda_ce",
                                  "kappa1", "kappa2", "mf_slope", "E1", "E2"]
     assert set(names[("fixed", 2)]) == set(names[("vud", 2)]) - {"1-lambda_ce", "kappa1", "kappa2"}
     assert set(names[("fae", 2)]) == set(names[("fixed", 2)]) | {"gamma_w"}
     assert set(names[("vud", 3)]) - set(names[("vud", 2)]) == {"k3_fraction", "q3", "kappa3", "E3"}
-    table = tune.declared_parameters()
+    table = space.declared_parameters()
     untuned = {name for name, v in table.items() if v.tuning is None}
     assert {"variant", "order", "sets", "fls_input", "theta0", "initial_error", "e0"} <= untuned
 
 
 def test_every_declared_range_lies_in_the_valid_range_and_is_log_scaled_where_it_spans_decades():
-    for name, variable in tune.declared_parameters().items():
+    for name, variable in space.declared_parameters().items():
         tuning = variable.tuning
         if tuning is None:
             continue
@@ -84,13 +87,13 @@ def test_every_declared_range_lies_in_the_valid_range_and_is_log_scaled_where_it
 @pytest.mark.parametrize("name", scenarios.scenario_names())
 def test_the_shipped_scenarios_start_inside_the_search_space(name):
     scenario = scenarios.load(name)
-    table = tune.declared_parameters()
+    table = space.declared_parameters()
     values = {n: v.start for n, v in table.items()}
     values.update(scenario.components[scenario.controller_instance].parameters)
-    assert tune.paper_conditions(values, table) is None
+    assert space.paper_conditions(values, table) is None
     for controller, variant in variants.CONTROLLER_VARIANTS.items():
-        dimensions = tune.search_space(variant, int(values["order"]))
-        for dimension, x in zip(dimensions, tune.sample_of(dimensions, values).values()):
+        dimensions = space.search_space(variant, int(values["order"]))
+        for dimension, x in zip(dimensions, space.sample_of(dimensions, values).values()):
             low, high, _ = dimension.bounds()
             assert low <= x <= high, (name, controller, dimension.name, x)
 
@@ -101,8 +104,8 @@ def test_the_hurwitz_fraction_gives_exactly_the_hurwitz_gains(order):
     from fmu_src import afc_math
 
     generator = random.Random(order)
-    dimensions = [tune.Dimension(f"k{i}", 0.05, 50.0, "log") for i in (1, 2)]
-    dimensions += [tune.Dimension(f"k{i}", 0.001, 0.999, "hurwitz") for i in range(3, order + 1)]
+    dimensions = [space.Dimension(f"k{i}", 0.05, 50.0, "log") for i in (1, 2)]
+    dimensions += [space.Dimension(f"k{i}", 0.001, 0.999, "hurwitz") for i in range(3, order + 1)]
 
     def hurwitz(k):
         try:
@@ -114,12 +117,12 @@ def test_the_hurwitz_fraction_gives_exactly_the_hurwitz_gains(order):
         sample = {"k1": 10 ** generator.uniform(-1.3, 1.7), "k2": 10 ** generator.uniform(-1.3, 1.7)}
         fractions = [generator.uniform(0.001, 0.999) for _ in range(3, order + 1)]
         sample.update({f"k{i}_fraction": f for i, f in zip(range(3, order + 1), fractions)})
-        values = tune.parameter_values(dimensions, sample, {})
+        values = space.parameter_values(dimensions, sample, {})
         k = tuple(values[f"k{i}"] for i in range(1, order + 1))
         assert hurwitz(k), (sample, k)
-        assert tune.sample_of(dimensions, values) == pytest.approx(sample, rel=1e-9)
+        assert space.sample_of(dimensions, values) == pytest.approx(sample, rel=1e-9)
         over = dict(sample, **{f"k{order}_fraction": 1.001})
-        values = tune.parameter_values(dimensions, over, {})
+        values = space.parameter_values(dimensions, over, {})
         assert not hurwitz(tuple(values[f"k{i}"] for i in range(1, order + 1))), over
 
 
@@ -137,23 +140,42 @@ def test_the_search_ranges_reach_neither_the_model_description_nor_the_c_tables(
     assert build_native.variables_header(CONTROLLER, "{guid}") == with_ranges_header
 
 
+@pytest.mark.parametrize("name", scenarios.scenario_names())
+def test_a_written_scenario_reads_back_as_itself_whatever_its_strings_hold(name):
+    """The tuned scenario file's writer (harness/scenario_toml.py): the shipped files' layout, any string."""
+    scenario = scenarios.configure(name, "fae")
+    scenario.description += ' -- "quoted" \\ back, tab\t, lambda \u03bb, outside the BMP \U0001d706'
+    text = scenario_toml(scenario, ["provenance", "", "first\nsecond"])
+    assert text.startswith("# provenance\n#\n# first\n# second\nname = ")
+    assert text.count("parameters = { ") == len(scenario.components)
+    assert text.count("\n[[connections]]\n") == len(scenario.connections)
+    back = scenarios.parse(scenarios.tomllib.loads(text), scenario.path)
+    for key in ("name", "description", "controller_instance", "start", "stop", "step", "divergence_bound",
+                "connections", "record", "signals", "bounds"):
+        assert getattr(back, key) == getattr(scenario, key), key
+    assert {n: (c.fmu, c.parameters) for n, c in back.components.items()} == \
+        {n: (c.fmu, c.parameters) for n, c in scenario.components.items()}
+
+
 def test_the_chatter_mark_is_the_controller_fmus_own_warning():
     from fmu_src import chatter_monitor
 
     state = chatter_monitor.new_state()
-    assert tune.CHATTER_MARK in chatter_monitor.warning(state, 1e-3)
+    assert candidate.CHATTER_MARK in chatter_monitor.warning(state, 1e-3)
 
 
 def test_pareto_front_and_the_equal_effort_verdicts():
     points = [(1.0, 5.0), (2.0, 3.0), (1.5, 6.0), (3.0, 3.0), (4.0, 1.0)]
-    assert tune.pareto_front(points) == [0, 1, 4]
+    assert pareto_front(points) == [0, 1, 4]
     row = lambda controller, value, error: {"controller": controller,  # noqa: E731
                                             "best": {"scores": {"ITAE": value}, "error": {"ITAE": error}}}
-    assert tune.beats([row("fae", 0.5, 0.01), row("vud", 0.6, 0.01)], "best", "ITAE", "fae", "vud")["answer"] == "yes"
-    assert tune.beats([row("fae", 0.5, 0.1), row("vud", 0.6, 0.1)], "best", "ITAE", "fae", "vud")["answer"] \
+    beats = comparison.beats
+    assert beats([row("fae", 0.5, 0.01), row("vud", 0.6, 0.01)], "best", "ITAE", "fae", "vud")["answer"] == "yes"
+    assert beats([row("fae", 0.5, 0.1), row("vud", 0.6, 0.1)], "best", "ITAE", "fae", "vud")["answer"] \
         .startswith("undecided")
-    assert tune.beats([row("fae", 0.7, 0.01), row("vud", 0.6, 0.01)], "best", "ITAE", "fae", "vud")["answer"] == "no"
-    result = tune.smallest([row("vud", 0.1, 0.001), row("fixed", 0.2, 0.001), row("fae", 0.15, 0.06)], "best", "ITAE")
+    assert beats([row("fae", 0.7, 0.01), row("vud", 0.6, 0.01)], "best", "ITAE", "fae", "vud")["answer"] == "no"
+    result = comparison.smallest([row("vud", 0.1, 0.001), row("fixed", 0.2, 0.001), row("fae", 0.15, 0.06)], "best",
+                                 "ITAE")
     assert result["controller"] == "vud" and not result["separated"]
 
 
@@ -161,7 +183,7 @@ def test_pareto_front_and_the_equal_effort_verdicts():
 @pytest.fixture(scope="module")
 def existing_study(tmp_path_factory, paths, edition):
     folder = tmp_path_factory.mktemp("tune_db")
-    summary = tune.tune(config(folder, paths, edition, trials=2, stop=0.05), outputs=False)
+    summary = tune(config(folder, paths, edition, trials=2, stop=0.05), outputs=False)
     return folder, summary
 
 
@@ -209,7 +231,7 @@ def test_bad_input_is_one_line_exit_2_and_leaves_the_database_untouched(existing
 # ------------------------------------------------------------------ a study end to end
 def test_a_study_writes_a_scenario_that_run_and_regress_take_and_run_reproduces_its_score_exactly(
         tmp_path, paths, edition, capsys, monkeypatch):
-    summary = tune.tune(config(tmp_path, paths, edition, trials=6, stop=0.5, held_out=("pendulum_case2",)))
+    summary = tune(config(tmp_path, paths, edition, trials=6, stop=0.5, held_out=("pendulum_case2",)))
     best = summary["best"]
     assert best is not None and best["half_step"] is not None
     assert summary["start"]["number"] == 0 and summary["finished"] == 6
@@ -241,18 +263,18 @@ def test_diverging_and_chattering_candidates_are_pruned_with_the_reason(tmp_path
     scenario = scenarios.configure("pendulum_case1", "vud", stop=0.3)
     task = {"scenario": scenario, "values": {}, "grid": [()], "fmu_paths": paths, "objective": "ITAE",
             "verify_below": -math.inf, "tolerance": 0.01}
-    assert tune.evaluate(task)["status"] == "ok"
+    assert candidate.evaluate(task)["status"] == "ok"
     bounded = scenarios.configure("pendulum_case1", "vud", stop=0.3)
     bounded.bounds["controller.u"] = 1.0
-    diverged = tune.evaluate(dict(task, scenario=bounded))
+    diverged = candidate.evaluate(dict(task, scenario=bounded))
     assert diverged["status"] == "diverged" and "controller.u" in diverged["reason"]
     coarse = scenarios.configure("pendulum_case1", "vud", step=1e-3, stop=5.0)  # chatters from t ~ 3 s
-    chatter = tune.evaluate(dict(task, scenario=coarse))
+    chatter = candidate.evaluate(dict(task, scenario=coarse))
     assert chatter["status"] == "chatter" and "u chatters" in chatter["reason"]
     # through a study: the pruned trial is kept, with its reason, and counted
     path = tmp_path / "bounded.toml"
-    path.write_text(tune.scenario_toml(bounded))
-    summary = tune.tune(config(tmp_path, paths, edition, scenario=str(path), trials=3), outputs=False)
+    path.write_text(scenario_toml(bounded))
+    summary = tune(config(tmp_path, paths, edition, scenario=str(path), trials=3), outputs=False)
     trials = trials_of(summary["storage"], summary["study"])
     first = trials[0]
     assert first.state == optuna.trial.TrialState.PRUNED and first.user_attrs["start"]
@@ -260,25 +282,25 @@ def test_diverging_and_chattering_candidates_are_pruned_with_the_reason(tmp_path
 
 
 def test_a_best_that_moves_at_half_the_step_is_pruned_not_reported(tmp_path, paths, edition):
-    strict = tune.tune(config(tmp_path, paths, edition, trials=1, tolerance=1e-12, study="strict"), outputs=False)
+    strict = tune(config(tmp_path, paths, edition, trials=1, tolerance=1e-12, study="strict"), outputs=False)
     assert strict["best"] is None and strict["counts"] == {"step-dependent": 1}
-    loose = tune.tune(config(tmp_path, paths, edition, trials=1, study="loose"), outputs=False)
+    loose = tune(config(tmp_path, paths, edition, trials=1, study="loose"), outputs=False)
     assert loose["best"]["number"] == 0 and loose["best"]["half_step"]["change"] < 0.01
 
 
 def test_a_constraint_keeps_a_candidate_that_misses_it_from_being_best(tmp_path, paths, edition):
-    free = tune.tune(config(tmp_path, paths, edition, trials=1, study="free"), outputs=False)
+    free = tune(config(tmp_path, paths, edition, trials=1, study="free"), outputs=False)
     umax = free["best"]["scores"]["umax"]
-    bound = tune.tune(config(tmp_path, paths, edition, trials=1, study="bound",
+    bound = tune(config(tmp_path, paths, edition, trials=1, study="bound",
                              constraints=(f"umax<={umax * 0.99}",)), outputs=False)
     assert bound["best"] is None
     trial = trials_of(bound["storage"], "bound")[0]
-    assert trial.state == optuna.trial.TrialState.COMPLETE and not tune.is_feasible(trial)
+    assert trial.state == optuna.trial.TrialState.COMPLETE and not storage.is_feasible(trial)
     assert list(trial.constraints.values())[0] == pytest.approx(umax * 0.01)
 
 
 def test_robust_scores_the_worst_case_over_the_grid(tmp_path, paths, edition):
-    summary = tune.tune(config(tmp_path, paths, edition, trials=1, vary=("plant.dist_gain=0,1",),
+    summary = tune(config(tmp_path, paths, edition, trials=1, vary=("plant.dist_gain=0,1",),
                                study="robust"), outputs=False)
     best = summary["best"]
     points = best["points"]
@@ -289,7 +311,7 @@ def test_robust_scores_the_worst_case_over_the_grid(tmp_path, paths, edition):
 
 def test_the_same_seed_gives_the_same_trials(tmp_path, paths, edition):
     def params(name, seed):
-        summary = tune.tune(config(tmp_path / name, paths, edition, trials=13, stop=0.05, seed=seed),
+        summary = tune(config(tmp_path / name, paths, edition, trials=13, stop=0.05, seed=seed),
                             outputs=False)
         return [t.params for t in trials_of(summary["storage"], summary["study"])]
 
@@ -356,8 +378,8 @@ def test_a_killed_run_resumes_with_every_finished_trial_kept(tmp_path, edition, 
 def test_trials_of_dead_processes_are_failed_and_retried_those_of_live_ones_kept(tmp_path, monkeypatch):
     import socket
 
-    storage = tune.open_storage(f"sqlite:///{tmp_path / 'x.db'}")
-    study = optuna.create_study(storage=storage, study_name="s")
+    database = storage.open_storage(f"sqlite:///{tmp_path / 'x.db'}")
+    study = optuna.create_study(storage=database, study_name="s")
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     owners = {"dead": {"host": socket.gethostname(), "pid": int(dead.stdout)},
               "live": {"host": socket.gethostname(), "pid": os.getppid()},
@@ -369,10 +391,10 @@ def test_trials_of_dead_processes_are_failed_and_retried_those_of_live_ones_kept
         if owner:
             trial.set_user_attr("owner", owner)
         trials[label] = trial.number
-    recovered, waiting = tune.recover_dead_trials(study)
+    recovered, waiting = storage.recover_dead_trials(study)
     assert recovered == [trials["dead"]] and waiting == 1  # the unclaimed one is young: it waits
-    monkeypatch.setattr(tune, "ORPHAN_S", 0.0)
-    recovered, waiting = tune.recover_dead_trials(study)
+    monkeypatch.setattr(storage, "ORPHAN_S", 0.0)
+    recovered, waiting = storage.recover_dead_trials(study)
     assert recovered == [trials["none"]] and waiting == 0
     states = {t.number: t.state for t in study.get_trials()}
     assert states[trials["live"]] == states[trials["elsewhere"]] == optuna.trial.TrialState.RUNNING
@@ -402,7 +424,8 @@ def test_the_docs_page_shows_the_declared_search_space_and_its_tune_commands_par
 
     text = (ROOT / "docs" / "tuning.md").read_text()
     block = text.split("<!-- search space: begin -->\n")[1].split("\n<!-- search space: end -->")[0]
-    assert block == tune.search_space_markdown(), "docs/tuning.md: paste tune.search_space_markdown()"
+    assert block == space.search_space_markdown(), \
+        "docs/tuning.md: paste harness.studies.tune.space.search_space_markdown()"
     parser = build_parser()
     commands = re.findall(r"(?m)^python -m harness (tune [^#\n]*?)\s*(?:#.*)?$", text)
     commands += re.findall(r"`python -m harness (tune [^`]*)`", text)
