@@ -40,12 +40,11 @@ from __future__ import annotations
 
 import ctypes
 import math
-import time as clock
 
 import numpy as np
 
 from . import compiled_loop, cvode, me_loop
-from .fmi import MODEL_EXCHANGE, FmiError, ModelExchangeComponent, ModelInfo
+from .fmi import MODEL_EXCHANGE, ModelExchangeComponent, ModelInfo
 from .loop_interface import FAILED_FUNCTIONS, LoopOutcome
 from .master import DIVERGENCE_CHECK_EVERY, FMI_WARNING, Divergence, Master, RunResult
 from .scenario import Scenario, ScenarioError
