@@ -153,8 +153,8 @@ class Master:
     """Instantiate, initialise and step the FMUs of one scenario.
 
     :meth:`run` is the life cycle every master shares; a master of another kind (harness/me_master.py)
-    specialises its steps: ``_model_info``, ``_instantiate``, ``_initialise``, ``_before_loop``,
-    ``_loop``, ``_end_run``, and the class attributes below.
+    specialises its steps (``_model_info``, ``_progress_units``, ``_begin_run``, ``_instantiate``,
+    ``_initialise``, ``_before_loop``, ``_loop``, ``_end_run``) and the class attributes below.
     """
 
     ALGORITHMS = ALGORITHMS
@@ -181,7 +181,7 @@ class Master:
         self.logging_on = logging_on
         self.loop = compiled_loop.choice(loop)  # "auto": the compiled loop if it can be built
         self._compiled_loop = self.LIBRARY.get(self.loop)  # resolved before any FMU is instantiated
-        self.components: dict = {}
+        self.components: dict = {}  # instance name -> its Component, while a run lasts
 
     def _model_info(self, name: str, fmu_paths: dict | None) -> ModelInfo:
         """The model description of component ``name`` (its co-simulation interface)."""

@@ -1,7 +1,7 @@
 /*
  * The master's fixed-step loop in C: the same FMI calls, in the same order, with the same
- * checks as the per-step path of harness/master.py (Master._propagate and the loop of
- * Master.run), for a block of communication points, with no Python between the calls.
+ * checks as the per-step path of harness/master.py (Master._propagate and Master._loop_python),
+ * for a block of communication points, with no Python between the calls.
  *
  * harness/master_loop.py prepares the plan once (the very value-reference and value arrays
  * of the Python plan) and calls master_loop_run for blocks of rows; whenever something
