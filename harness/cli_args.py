@@ -22,8 +22,9 @@ from pathlib import Path
 
 from . import scenario as scenarios
 from .fmi import FmiError, FmuFileError
-from .master import SimulationFailed, model_info, simulate
+from .master import SimulationFailed, simulate
 from .scenario import ScenarioError
+from .scenario_checks import model_info
 
 USAGE_EXIT = 2  # a mistake in the command line or in a scenario file
 FAILED_EXIT = 1  # the command ran and failed (a diverged or crashed run, a failing regression)

@@ -18,19 +18,17 @@ numpy array; nothing is looked up by name, allocated or logged per step.
 """
 from __future__ import annotations
 
-import math
-import numbers
 import time as clock
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-import build_fmu
-
-from . import master_loop
-from .fmi import BoundArrayCall, Component, FmiError, FmuFileError, ModelInfo
-from .scenario import Scenario, ScenarioError, did_you_mean
+from . import compiled_loop, master_loop
+from .fmi import BoundArrayCall, Component, FmiError, ModelInfo
+from .loop_interface import FAILED_FUNCTIONS, LoopOutcome
+from .scenario import Scenario, ScenarioError
+from .scenario_checks import model_info, resolve_fmu, validate
 
 ALGORITHMS = ("feedthrough", "jacobi")
 FMI_WARNING = 1
@@ -95,120 +93,6 @@ class RunResult:
         return path
 
 
-def resolve_fmu(spec_fmu: str, scenario: Scenario, built: dict | None) -> Path:
-    if spec_fmu.endswith(".fmu"):
-        path = Path(spec_fmu)
-        if not path.is_absolute() and scenario.path is not None:
-            path = scenario.path.parent / path
-        if not path.exists():
-            raise ScenarioError(f"FMU file not found: {path}")
-        return path
-    if built is None:
-        built = build_fmu.ensure_built()
-    if spec_fmu not in built:
-        raise ScenarioError(f"unknown FMU {spec_fmu!r}; valid: {', '.join(sorted(built))} or a path to an .fmu file")
-    return built[spec_fmu]
-
-
-def _names(info: ModelInfo, causality: str) -> list:
-    return [v.name for v in info.variables.values() if v.causality == causality]
-
-
-def _article(word: str) -> str:
-    return "an" if word[:1] in "aeiou" else "a"
-
-
-def _where(scenario: Scenario) -> str:
-    """How messages name the scenario: its file, else its name."""
-    return str(scenario.path) if scenario.path is not None else scenario.name
-
-
-def model_info(scenario: Scenario, instance: str, fmu_paths: dict | None) -> ModelInfo:
-    """The model description of one component; a missing or broken FMU file is a ScenarioError
-    naming the file, the component and its ``fmu`` key."""
-    spec = scenario.components[instance]
-    try:
-        return ModelInfo.read(resolve_fmu(spec.fmu, scenario, fmu_paths))
-    except (ScenarioError, FmuFileError, FileNotFoundError) as error:
-        raise ScenarioError(f"{_where(scenario)}: [components.{instance}] fmu = {spec.fmu!r}: {error}") from None
-
-
-def _check_variable(dotted: str, infos: dict, causality: str, role: str):
-    instance, _, variable = dotted.partition(".")
-    if instance not in infos:
-        raise ScenarioError(f"{role} {dotted!r}: unknown instance {instance!r}{did_you_mean(instance, infos)}; "
-                            f"valid: {', '.join(infos)}")
-    info = infos[instance]
-    found = info.variables.get(variable)
-    wanted = _names(info, causality)
-    if found is None:
-        raise ScenarioError(f"{role} {dotted!r}: {instance} has no variable {variable!r}"
-                            f"{did_you_mean(variable, wanted)}; valid {causality}s: {', '.join(wanted)}")
-    if found.causality != causality:
-        raise ScenarioError(f"{role} {dotted!r} is {_article(found.causality)} {found.causality}, "
-                            f"not {_article(causality)} {causality}; "
-                            f"valid {causality}s of {instance}: {', '.join(wanted)}")
-    if found.type != "Real":
-        raise ScenarioError(f"{role} {dotted!r} is of type {found.type}; connections and records are Real")
-
-
-def _check_parameter_value(instance: str, parameter: str, value, kind: str):
-    """A scenario value must be a number (not text, not a Boolean), integral for an Integer.
-
-    Range checks stay with the FMU, which names the valid range; this only stops values
-    that float()/int() would silently convert ("0.99") or truncate (1.5 -> 1).
-    """
-    where = f"[components.{instance}.parameters] {parameter} = {value!r}"
-    if kind == "Boolean":
-        if not isinstance(value, bool):
-            raise ScenarioError(f"{where} is not a Boolean (true or false)")
-        return
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy numbers too
-        raise ScenarioError(f"{where} is not a number")
-    if kind == "Integer" and not (math.isfinite(value) and value == int(value)):
-        raise ScenarioError(f"{where} is not an integer")
-
-
-def validate(scenario: Scenario, infos: dict):
-    """Check every name of the scenario against the model descriptions; a mistake is one
-    ScenarioError naming the file, the table and the key (and the close match of a misspelt name)."""
-    try:
-        _validate(scenario, infos)
-    except ScenarioError as error:
-        raise ScenarioError(f"{_where(scenario)}: {error}") from None
-
-
-def _validate(scenario: Scenario, infos: dict):
-    for name, spec in scenario.components.items():
-        info = infos[name]
-        for parameter in spec.parameters:
-            found = info.variables.get(parameter)
-            if found is None or found.causality != "parameter":
-                valid = _names(info, "parameter")
-                raise ScenarioError(f"[components.{name}.parameters] {info.model_identifier} has no parameter "
-                                    f"{parameter!r}"
-                                    f"{did_you_mean(parameter, valid)}; valid: {', '.join(valid)}")
-            _check_parameter_value(name, parameter, spec.parameters[parameter], found.type)
-    targets = set()
-    for index, connection in enumerate(scenario.connections):
-        _check_variable(connection.source, infos, "output", f"[[connections]] {index + 1}: from =")
-        _check_variable(connection.target, infos, "input", f"[[connections]] {index + 1}: to =")
-        if connection.target in targets:
-            raise ScenarioError(f"[[connections]] {index + 1}: input {connection.target!r} is connected twice")
-        targets.add(connection.target)
-    for dotted in scenario.record:
-        _check_variable(dotted, infos, "output", "[record] variables:")
-    connected = {c.source for c in scenario.connections}
-    for dotted in scenario.bounds:
-        _check_variable(dotted, infos, "output", "[bounds]")
-        if dotted not in connected and dotted not in scenario.record:
-            raise ScenarioError(f"[bounds] {dotted!r} is neither connected nor recorded, so it is never read")
-    for role, dotted in scenario.signals.items():
-        if dotted not in scenario.record:
-            raise ScenarioError(f"[signals] {role} = {dotted!r} is not in [record] variables"
-                                f"{did_you_mean(dotted, scenario.record)}; add it there")
-
-
 @dataclass
 class _Read:
     component: Component
@@ -266,14 +150,25 @@ def _order(scenario: Scenario, infos: dict, reads: dict, algorithm: str) -> list
 
 
 class Master:
-    """Instantiate, initialise and step the FMUs of one scenario."""
+    """Instantiate, initialise and step the FMUs of one scenario.
+
+    :meth:`run` is the life cycle every master shares; a master of another kind (harness/me_master.py)
+    specialises its steps (``_model_info``, ``_progress_units``, ``_begin_run``, ``_instantiate``,
+    ``_initialise``, ``_before_loop``, ``_loop``, ``_end_run``) and the class attributes below.
+    """
+
+    ALGORITHMS = ALGORITHMS
+    #: what stops a run with the rows computed so far (SimulationFailed)
+    RUN_ERRORS = (FmiError, Divergence, ScenarioError)
+    #: the compiled loop (harness/compiled_loop.py) of this kind of master
+    LIBRARY = master_loop.LIBRARY
 
     def __init__(self, scenario: Scenario, algorithm: str = "feedthrough", fmu_paths: dict | None = None,
                  logging_on: bool = True, loop: str = "auto", prepared: dict | None = None):
         """``prepared``: {FMU path: (ModelInfo, folder it is extracted to)} kept by the caller for FMUs
         it runs many times (harness/studies/tune/); other FMUs are read and extracted per run."""
-        if algorithm not in ALGORITHMS:
-            raise ScenarioError(f"unknown algorithm {algorithm!r}; valid: {', '.join(ALGORITHMS)}")
+        if algorithm not in self.ALGORITHMS:
+            raise ScenarioError(f"unknown algorithm {algorithm!r}; valid: {', '.join(self.ALGORITHMS)}")
         self.scenario, self.algorithm = scenario, algorithm
         self.infos, self.extracted = {}, {}
         for name, spec in scenario.components.items():
@@ -281,12 +176,16 @@ class Master:
             if prepared and path in prepared:
                 self.infos[name], self.extracted[name] = prepared[path]
             else:
-                self.infos[name] = model_info(scenario, name, fmu_paths)  # names a bad FMU file in one line
+                self.infos[name] = self._model_info(name, fmu_paths)  # names a bad FMU file in one line
         validate(scenario, self.infos)
         self.logging_on = logging_on
-        self.loop = master_loop.choice(loop)  # "auto": the compiled loop if it can be built (master_loop.py)
-        self._compiled_loop = master_loop.library(self.loop)  # resolved before any FMU is instantiated
-        self.components: dict[str, Component] = {}
+        self.loop = compiled_loop.choice(loop)  # "auto": the compiled loop if it can be built
+        self._compiled_loop = self.LIBRARY.get(self.loop)  # resolved before any FMU is instantiated
+        self.components: dict = {}  # instance name -> its Component, while a run lasts
+
+    def _model_info(self, name: str, fmu_paths: dict | None) -> ModelInfo:
+        """The model description of component ``name`` (its co-simulation interface)."""
+        return model_info(self.scenario, name, fmu_paths)
 
     def _prepare_plan(self, algorithm: str | None = None) -> list:
         """The read/write actions of one communication point; sets the record columns."""
@@ -362,52 +261,45 @@ class Master:
                 "try a smaller step")
 
     def run(self, progress=None, progress_every: int = 0) -> RunResult:
-        """Run the scenario; on failure raise SimulationFailed holding the partial result."""
+        """Run the scenario; on failure raise SimulationFailed holding the partial result.
+
+        Every FMU is instantiated, set up and given its parameters, and the initial values are
+        propagated through the connections in dependency order (consistent start values, for every
+        algorithm); then the master's own steps run (``_initialise``, ``_before_loop`` and ``_loop``:
+        the fixed-step loop here), the last rows are checked against their bounds, and every FMU is
+        freed whatever happened.
+        """
+        unit, count = self._progress_units()
         if isinstance(progress_every, bool) or not isinstance(progress_every, int) or progress_every < 0:
-            raise ValueError(f"progress_every = {progress_every!r}: a whole number of steps >= 0 (0: steps // 200)")
+            raise ValueError(f"progress_every = {progress_every!r}: a whole number of {unit} >= 0 "
+                             f"(0: {unit} // 200)")
         scenario = self.scenario
-        steps, step, start = scenario.steps, scenario.step, scenario.start
-        stop = start + steps * step
+        steps, start = scenario.steps, scenario.start
+        stop = start + steps * scenario.step
         wall_start = clock.perf_counter()
         record = None
         self.rows_done = 0
+        self._begin_run()
         try:
-            for name, spec in scenario.components.items():
-                component = Component(name, self.infos[name]).instantiate(logging_on=self.logging_on,
-                                                                          extracted=self.extracted.get(name))
-                self.components[name] = component
+            for name in scenario.components:
+                self.components[name] = self._instantiate(name)
             for name, spec in scenario.components.items():
                 component = self.components[name]
                 component.setup(start, stop)
                 component.set_parameters(spec.parameters)
-            # initial values propagated through the connections in dependency order, for
-            # both algorithms (consistent start values); then the plan of the loop
             plan = self._prepare_plan("feedthrough")
             self._propagate(plan, start)
-            if self.algorithm != "feedthrough":
-                plan = self._prepare_plan()
+            plan = self._initialise(plan)
             record = np.empty((steps + 1, len(self.plan_columns)))
-            for component in self.components.values():
-                component.exit_initialization()
-            every = progress_every or max(1, steps // 200)
-            compiled = self._compiled_loop
+            self._before_loop(plan, record)
             loop_start = clock.perf_counter()
-            if compiled is None:
-                self._loop_python(plan, record, progress, every)
-            else:
-                self._loop_compiled(compiled, plan, record, progress, every)
-            self._propagate(plan, stop)
-            row = record[steps]
-            for action in plan:
-                if action.copies is None and action.recorded:
-                    row[action.first_column:action.first_column + action.recorded] = action.view[:action.recorded]
-            self.rows_done = steps + 1
+            self._loop(plan, record, progress, progress_every or max(1, count // 200))
             self._check_bound(record, max(0, self.rows_done - DIVERGENCE_CHECK_EVERY - 1), self.rows_done,
                               self.column_bounds)
             self.loop_s = clock.perf_counter() - loop_start
             if progress is not None:
                 progress(steps, steps)
-        except (FmiError, Divergence, ScenarioError) as error:
+        except self.RUN_ERRORS as error:
             result = self._result(record, self.rows_done, clock.perf_counter() - wall_start, complete=False)
             if isinstance(error, ScenarioError) and record is None:
                 raise
@@ -417,8 +309,52 @@ class Master:
             for component in self.components.values():
                 component.free()
             self.components = {}
+            self._end_run()
         return self._result(record, self.rows_done, clock.perf_counter() - wall_start, complete=True)
 
+    # ------------------------------------------------ the steps a master specialises
+    def _progress_units(self) -> tuple:
+        """(what progress counts, how many of them a run has)."""
+        return "steps", self.scenario.steps
+
+    def _begin_run(self):
+        """Per-run state set before anything is instantiated."""
+
+    def _instantiate(self, name: str) -> Component:
+        return Component(name, self.infos[name]).instantiate(logging_on=self.logging_on,
+                                                              extracted=self.extracted.get(name))
+
+    def _initialise(self, plan: list) -> list:
+        """After the initial values: every FMU out of initialisation mode; returns the loop's plan (the
+        algorithm's order of reads and writes)."""
+        if self.algorithm != "feedthrough":
+            plan = self._prepare_plan()
+        for component in self.components.values():
+            component.exit_initialization()
+        return plan
+
+    def _before_loop(self, plan: list, record):
+        """What the loop needs made before it is timed (nothing for the fixed-step loop)."""
+
+    def _loop(self, plan: list, record, progress, every: int):
+        """Rows 0 .. steps: the fixed-step loop (compiled or Python), then the last communication point."""
+        scenario = self.scenario
+        steps = scenario.steps
+        if self._compiled_loop is None:
+            self._loop_python(plan, record, progress, every)
+        else:
+            self._loop_compiled(self._compiled_loop, plan, record, progress, every)
+        self._propagate(plan, scenario.start + steps * scenario.step)
+        row = record[steps]
+        for action in plan:
+            if action.copies is None and action.recorded:
+                row[action.first_column:action.first_column + action.recorded] = action.view[:action.recorded]
+        self.rows_done = steps + 1
+
+    def _end_run(self):
+        """After every FMU is freed, whether the run completed or not."""
+
+    # ------------------------------------------------------- the fixed-step loop
     def _loop_python(self, plan: list, record, progress, every: int):
         """Rows 0 .. steps - 1: propagate, record, check, step every FMU (the reference loop)."""
         scenario = self.scenario
@@ -447,19 +383,19 @@ class Master:
         finally:
             self.rows_done = rows_done  # for the partial result, if something stopped the loop
 
-    def _loop_compiled(self, function, plan: list, record, progress, every: int):
+    def _loop_compiled(self, library, plan: list, record, progress, every: int):
         """The same rows by harness/master_loop.c, in blocks of ``every`` rows (the progress
         interval); whatever stops it is raised here as _loop_python raises it."""
         scenario = self.scenario
         steps, step, start = scenario.steps, scenario.step, scenario.start
         components = list(self.components.values())
-        loop = master_loop.CompiledLoop(function, plan, components, record, self.column_bounds,
+        loop = master_loop.CompiledLoop(library, plan, components, record, self.column_bounds,
                                         DIVERGENCE_CHECK_EVERY)
         n = 0
         while n < steps:
             last = min(steps, (n // every + 1) * every)
             outcome = loop.run(start, step, n, last)
-            if outcome.outcome != master_loop.LOOP_DONE:
+            if outcome.outcome != LoopOutcome.DONE:
                 self._raise_stop(outcome, plan, components, record)
             self.rows_done = n = last
             if progress is not None and n % every == 0:
@@ -471,19 +407,17 @@ class Master:
         t = self.scenario.start + row * self.scenario.step
         kind = outcome.outcome
         self.rows_done = row  # the row's reads and writes are not complete
-        if kind == master_loop.LOOP_READ_FAILED:
-            plan[outcome.action].component.fail("fmi2GetReal", outcome.status, t)
-        if kind == master_loop.LOOP_WRITE_DIVERGED:
-            self._diverged_on_write(plan[outcome.action], outcome.copy, outcome.value, t)
-        if kind == master_loop.LOOP_WRITE_FAILED:
-            plan[outcome.action].component.fail("fmi2SetReal", outcome.status, t)
+        if kind == LoopOutcome.WRITE_DIVERGED:
+            self._diverged_on_write(plan[outcome.index], outcome.copy, outcome.value, t)
+        if kind in (LoopOutcome.READ_FAILED, LoopOutcome.WRITE_FAILED):
+            plan[outcome.index].component.fail(FAILED_FUNCTIONS[kind], outcome.status, t)
         self.rows_done = row + 1  # the row is recorded
-        if kind == master_loop.LOOP_RECORD_DIVERGED:
+        if kind == LoopOutcome.RECORD_DIVERGED:
             self._check_bound(record, self.rows_done - DIVERGENCE_CHECK_EVERY, self.rows_done, self.column_bounds)
-        if kind == master_loop.LOOP_STEP_FAILED:
-            components[outcome.action].fail("fmi2DoStep", outcome.status, t)
+        if kind == LoopOutcome.STEP_FAILED:
+            components[outcome.index].fail(FAILED_FUNCTIONS[kind], outcome.status, t)
         raise RuntimeError(f"the compiled master loop stopped at row {row} for no reason the Python loop "
-                           f"knows (outcome {kind}); rerun with {master_loop.ENVIRONMENT_SWITCH}=python")
+                           f"knows (outcome {kind}); rerun with {compiled_loop.ENVIRONMENT_SWITCH}=python")
 
     def _check_bound(self, record, first: int, last: int, bound: np.ndarray):
         block = record[first:last]

@@ -1,12 +1,12 @@
 /*
  * The Model Exchange master's integration loop in C: the same FMI calls, in the same order, with
  * the same checks as the Python loop of harness/me_master.py (ModelExchangeMaster._python_evaluate,
- * _record_row, _integrate_python), with no Python between CVODE's steps.
+ * _record_row, _steps_python), with no Python between CVODE's steps.
  *
  * harness/me_loop.py prepares the loop once: the master's plan (the very value-reference and
- * value arrays of the Python plan: the Action layout of harness/master_loop.c), SetTime of every
+ * value arrays of the Python plan: the Actions of harness/loop_interface.h), SetTime of every
  * FMU, the state blocks (SetContinuousStates / GetDerivatives / GetEventIndicators bound to
- * slices of the shared arrays x, dx, z), CVODE's memory and three of its functions.  CVODE calls
+ * slices of the shared arrays x, dx, z), CVODE's memory and the CVODE functions it calls.  CVODE calls
  * me_rhs and me_roots (their addresses go to CVodeInit and CVodeRootInit, this struct as user
  * data); me_loop_run takes CVODE's steps and records the output grid until a block of rows is
  * done, an event needs the master (a root, a time event, a step end an FMU asked to see) or
@@ -19,142 +19,27 @@
  * The root function does the same with GetEventIndicators into z, gout = z.
  * An FMU status > warning: remembered, return -1 (CVODE stops; the master raises the FmiError).
  *
- * Built for the machine that runs the harness (c_toolchain.host_library), -ffp-contract=off.
+ * The structs (MeLoop among them), the LOOP_ codes and the plan's pass are harness/loop_interface.h,
+ * shared with harness/master_loop.c.  Built for the machine that runs the harness
+ * (c_toolchain.host_library), -ffp-contract=off.
  */
-#include <math.h>
-#include <stdbool.h>
-#include <stddef.h>
-#include <stdint.h>
-#include <string.h>
+#include "loop_interface.h"
 
-#if defined(_WIN32)
-#define EXPORT __declspec(dllexport)
-#else
-#define EXPORT __attribute__((visibility("default")))
-#endif
-
-#define STATUS_WARNING 1
 #define CV_ONE_STEP 2
 #define CV_ROOT_RETURN 2
 
-typedef int (*Fmi2ArrayCall)(void *instance, const unsigned *references, size_t count, double *values);
-typedef int (*Fmi3ArrayCall)(void *instance, const unsigned *references, size_t count, double *values,
-                             size_t value_count);
 typedef int (*SetTimeCall)(void *instance, double time);
 typedef int (*VectorCall)(void *instance, double *values, size_t count); /* states, derivatives, indicators */
 
-typedef void *N_Vector;
 typedef int (*CVodeCall)(void *memory, double tout, N_Vector yout, double *tret, int itask);
 typedef int (*CVodeGetDkyCall)(void *memory, double t, int k, N_Vector dky);
 typedef double *(*GetArrayPointerCall)(N_Vector vector);
 typedef int (*CVodeGetLastOrderCall)(void *memory, int *order);
 typedef int (*CVodeGetCurrentTimeCall)(void *memory, double *time);
 
-#define MAX_ORDER 5 /* BDF's highest order */
-
-enum { ACTION_READ = 0, ACTION_WRITE = 1 };
-
-/* harness/master_loop.c's Action, field for field (harness/master_loop.py's ctypes Action) */
-typedef struct {
-    int32_t kind;
-    int32_t fmi_version;
-    void *instance;
-    void *call;
-    const unsigned *references;
-    size_t count;
-    double *values;
-    size_t first_column;
-    size_t recorded;
-    double *const *sources;
-    const size_t *source_index;
-    const double *bounds;
-} Action;
-
-typedef struct {
-    void *instance;
-    void *set_time;
-} Timer;
-
-typedef struct {
-    void *instance;
-    void *set_states;
-    void *get_derivatives;
-    void *get_indicators;
-    size_t offset;           /* of its states in x, dx */
-    size_t states;
-    size_t indicator_offset; /* of its indicators in z */
-    size_t indicators;
-} Block;
-
-/* what stopped me_loop_run, or what failed inside an evaluation */
-enum {
-    LOOP_DONE = 0,             /* the rows of the block were recorded */
-    LOOP_READ_FAILED = 1,      /* getReal of action `index` returned `status` */
-    LOOP_WRITE_DIVERGED = 2,   /* copy `copy` of action `index` was beyond its bound (`value`) */
-    LOOP_WRITE_FAILED = 3,     /* setReal of action `index` returned `status` */
-    LOOP_RECORD_DIVERGED = 4,  /* a recorded value of the rows ending at `row` is beyond its bound */
-    LOOP_SET_TIME_FAILED = 5,  /* SetTime of timer `index` returned `status` */
-    LOOP_SET_STATES_FAILED = 6,/* SetContinuousStates of block `index` */
-    LOOP_DERIVATIVES_FAILED = 7,  /* GetDerivatives of block `index` */
-    LOOP_INDICATORS_FAILED = 8,   /* GetEventIndicators of block `index` */
-    LOOP_SOLVER_FAILED = 9,    /* CVode (or CVodeGetDky) returned `status` < 0 */
-    LOOP_EVENT = 10,           /* a step ended at `time` with an event for the master (`status`: CVode's flag) */
-};
-
-typedef struct {
-    int32_t outcome;
-    int32_t status;
-    int64_t row;
-    int64_t index;
-    int64_t copy;
-    double value;
-    double time;
-} Outcome;
-
-typedef struct {
-    const Action *plan;
-    size_t actions;
-    const Timer *timers;
-    size_t timer_count;
-    const Block *blocks;
-    size_t block_count;
-    double *x;
-    double *dx;
-    double *z;
-    size_t states;      /* length of x and dx (at least 1) */
-    size_t indicators;  /* length of z */
-    void *cvode_memory;
-    N_Vector y;
-    N_Vector interpolated;
-    void *cvode;
-    void *get_dky;
-    void *get_array_pointer;
-    void *get_last_order;
-    void *get_current_time;
-    double *taylor;     /* (MAX_ORDER + 1) x states: the last step's interpolant, y^(k)(tn) / k! */
-    double *record;
-    size_t columns;
-    const double *column_bounds;
-    int64_t check_every;
-    int64_t rows;
-    double start;
-    double step;
-    Outcome failure;    /* the last evaluation's failure (cleared before each step) */
-    int64_t evaluations;
-} MeLoop;
-
-static int array_call(const Action *a) {
-    if (a->fmi_version == 3)
-        return ((Fmi3ArrayCall)a->call)(a->instance, a->references, a->count, a->values, a->count);
-    return ((Fmi2ArrayCall)a->call)(a->instance, a->references, a->count, a->values);
-}
-
 static int fail(Outcome *o, int32_t what, int64_t index, int32_t status, double time) {
-    o->outcome = what;
-    o->index = index;
-    o->status = status;
     o->time = time;
-    return what;
+    return loop_stop(o, what, index, status);
 }
 
 /* SetTime, SetContinuousStates from x, the plan: Master._propagate after ModelExchangeMaster._set_point */
@@ -169,27 +54,9 @@ static int set_point(MeLoop *m, double t, Outcome *o) {
         int status = ((VectorCall)block->set_states)(block->instance, m->x + block->offset, block->states);
         if (status > STATUS_WARNING) return fail(o, LOOP_SET_STATES_FAILED, (int64_t)b, status, t);
     }
-    for (size_t i = 0; i < m->actions; i++) {
-        const Action *a = &m->plan[i];
-        if (a->kind == ACTION_READ) {
-            int status = array_call(a);
-            if (status > STATUS_WARNING) return fail(o, LOOP_READ_FAILED, (int64_t)i, status, t);
-            continue;
-        }
-        for (size_t k = 0; k < a->count; k++) {
-            double value = a->sources[k][a->source_index[k]];
-            double bound = a->bounds[k];
-            if (!(-bound < value && value < bound)) {
-                o->copy = (int64_t)k;
-                o->value = value;
-                return fail(o, LOOP_WRITE_DIVERGED, (int64_t)i, 0, t);
-            }
-            a->values[k] = value;
-        }
-        int status = array_call(a);
-        if (status > STATUS_WARNING) return fail(o, LOOP_WRITE_FAILED, (int64_t)i, status, t);
-    }
-    return LOOP_DONE;
+    int what = run_plan(m->plan, m->actions, o);
+    if (what != LOOP_DONE) o->time = t;
+    return what;
 }
 
 /* an evaluation's verdict for CVODE: 0, 1 (recoverable: a value beyond its bound), -1 (an FMU failed) */
@@ -232,16 +99,6 @@ EXPORT int me_roots(double t, N_Vector y, double *gout, void *user_data) {
     }
     memcpy(gout, m->z, m->indicators * sizeof(double));
     return 0;
-}
-
-static int record_within_bounds(const double *record, size_t columns, const double *bounds, int64_t first,
-                                int64_t last) {
-    for (int64_t row = first; row < last; row++) {
-        const double *values = record + (size_t)row * columns;
-        for (size_t c = 0; c < columns; c++)
-            if (!(fabs(values[c]) < bounds[c])) return 0;
-    }
-    return 1;
 }
 
 /*
@@ -304,12 +161,7 @@ EXPORT int me_loop_run(MeLoop *m, double target, double next_event, int32_t ever
                 outcome->row = row;
                 return what;
             }
-            double *values = m->record + (size_t)row * m->columns;
-            for (size_t i = 0; i < m->actions; i++) {
-                const Action *a = &m->plan[i];
-                if (a->kind == ACTION_READ && a->recorded)
-                    memcpy(values + a->first_column, a->values, a->recorded * sizeof(double));
-            }
+            record_reads(m->plan, m->actions, m->record + (size_t)row * m->columns);
             row++;
             if (row % m->check_every == 0 &&
                 !record_within_bounds(m->record, m->columns, m->column_bounds, row - m->check_every, row)) {

@@ -2,112 +2,44 @@
 
 With the Python loop of :class:`harness.me_master.ModelExchangeMaster`, CVODE calls back into
 Python for every derivative and indicator evaluation and the master records every output row
-from Python: about 15 us per evaluation and per row on top of what the FMUs cost, most of a
-run.  :class:`CompiledIntegration` hands CVODE the C functions ``me_rhs`` and ``me_roots`` of
-harness/me_loop.c instead, over the very plan of the Python loop (its value-reference and value
+from Python.  :class:`CompiledIntegration` hands CVODE the C functions ``me_rhs`` and ``me_roots``
+of harness/me_loop.c instead, over the very plan of the Python loop (its value-reference and value
 arrays, FMI function pointers and bounds), and records the rows in C; events, failures and the
 FMUs' life cycle stay in the Python master, which raises what its Python loop raises.
 
-The same switch as the co-simulation loop's (harness/master_loop.py): ``AFC_MASTER_LOOP=python``
-keeps the Python loop, ``c`` requires the compiled one; built on first use with zig's C
-compiler (the ``native`` and ``test`` extras) and cached in build/native/obj.
-tests/test_me_master.py holds the two loops bit-identical, events and failures included.
+Built, loaded and chosen as the co-simulation loop is (harness/compiled_loop.py:
+``AFC_MASTER_LOOP=python`` keeps the Python loop, ``c`` requires the compiled one); its structs are
+harness/loop_interface.h, mirrored in harness/loop_interface.py.  tests/test_me_master.py holds the
+two loops bit-identical, events and failures included.
 """
 from __future__ import annotations
 
 import ctypes
-import sys
 from pathlib import Path
 
 import numpy as np
 
-import c_toolchain
-
-from . import cvode, master_loop
+from . import cvode
+from .compiled_loop import CompiledLibrary, function_address
+from .loop_interface import Block, MeLoop, Outcome, Timer, plan_actions
 
 SOURCE = Path(__file__).with_name("me_loop.c")
-CHOICES = master_loop.CHOICES
-ENVIRONMENT_SWITCH = master_loop.ENVIRONMENT_SWITCH
-
-(LOOP_DONE, LOOP_READ_FAILED, LOOP_WRITE_DIVERGED, LOOP_WRITE_FAILED, LOOP_RECORD_DIVERGED, LOOP_SET_TIME_FAILED,
- LOOP_SET_STATES_FAILED, LOOP_DERIVATIVES_FAILED, LOOP_INDICATORS_FAILED, LOOP_SOLVER_FAILED, LOOP_EVENT) = range(11)
-#: the FMI function each failure names (FMI 2.0 names; an FMI 3.0 instance reports its own)
-FAILED_FUNCTIONS = {LOOP_READ_FAILED: "fmi2GetReal", LOOP_WRITE_FAILED: "fmi2SetReal",
-                    LOOP_SET_TIME_FAILED: "fmi2SetTime", LOOP_SET_STATES_FAILED: "fmi2SetContinuousStates",
-                    LOOP_DERIVATIVES_FAILED: "fmi2GetDerivatives", LOOP_INDICATORS_FAILED: "fmi2GetEventIndicators"}
-
-_void, _size = ctypes.c_void_p, ctypes.c_size_t
 
 
-class Timer(ctypes.Structure):
-    _fields_ = [("instance", _void), ("set_time", _void)]
-
-
-class Block(ctypes.Structure):
-    _fields_ = [("instance", _void), ("set_states", _void), ("get_derivatives", _void), ("get_indicators", _void),
-                ("offset", _size), ("states", _size), ("indicator_offset", _size), ("indicators", _size)]
-
-
-class Outcome(ctypes.Structure):
-    _fields_ = [("outcome", ctypes.c_int32), ("status", ctypes.c_int32), ("row", ctypes.c_int64),
-                ("index", ctypes.c_int64), ("copy", ctypes.c_int64), ("value", ctypes.c_double),
-                ("time", ctypes.c_double)]
-
-
-class MeLoop(ctypes.Structure):
-    _fields_ = [("plan", _void), ("actions", _size), ("timers", _void), ("timer_count", _size),
-                ("blocks", _void), ("block_count", _size), ("x", _void), ("dx", _void), ("z", _void),
-                ("states", _size), ("indicators", _size), ("cvode_memory", _void), ("y", _void),
-                ("interpolated", _void), ("cvode", _void), ("get_dky", _void), ("get_array_pointer", _void),
-                ("get_last_order", _void), ("get_current_time", _void), ("taylor", _void), ("record", _void), ("columns", _size), ("column_bounds", _void), ("check_every", ctypes.c_int64),
-                ("rows", ctypes.c_int64), ("start", ctypes.c_double), ("step", ctypes.c_double),
-                ("failure", Outcome), ("evaluations", ctypes.c_int64)]
-
-
-_library = None
-_unavailable = None
-
-
-def choice(loop: str = "auto") -> str:
-    return master_loop.choice(loop)
-
-
-def library(loop: str = "auto"):
-    """The compiled library (me_loop_run, me_rhs, me_roots), or None for the Python loop (as
-    harness/master_loop.py's ``library``: "auto" falls back and says why once, "c" raises)."""
-    global _library, _unavailable
-    wanted = choice(loop)
-    if wanted == "python":
-        return None
-    if _library is None and _unavailable is None:
-        try:
-            _library = _load()
-        except master_loop.LoopUnavailable as error:
-            _unavailable = str(error)
-            if wanted == "auto" and "zig's C compiler is not installed" not in _unavailable:
-                print(f"warning: the Model Exchange master runs its Python loop: {_unavailable}", file=sys.stderr)
-    if _library is None and wanted == "c":
-        raise master_loop.LoopUnavailable(f"{ENVIRONMENT_SWITCH}=c: {_unavailable}")
-    return _library
-
-
-def _load():
-    if not c_toolchain.compiler_available():
-        raise master_loop.LoopUnavailable("zig's C compiler is not installed (pip install -e '.[native]')")
-    try:
-        loaded = ctypes.CDLL(str(c_toolchain.host_library("me_loop", (SOURCE,))))
-    except (c_toolchain.NativeBuildError, OSError) as error:
-        raise master_loop.LoopUnavailable(f"the compiled loop {SOURCE.name} cannot be built or loaded: "
-                                          f"{str(error).strip().splitlines()[0]}") from error
-    run = loaded.me_loop_run
+def _declare(library):
+    run = library.me_loop_run
     run.restype = ctypes.c_int
     run.argtypes = [ctypes.POINTER(MeLoop), ctypes.c_double, ctypes.c_double, ctypes.c_int32, ctypes.c_int64,
                     ctypes.c_int64, ctypes.POINTER(Outcome)]
-    return loaded
 
 
-def function_address(loaded, name: str) -> int:
-    return ctypes.cast(getattr(loaded, name), _void).value
+LIBRARY = CompiledLibrary("me_loop", SOURCE, "the Model Exchange master", _declare)
+
+
+def library(loop: str = "auto"):
+    """The compiled library (me_loop_run, me_rhs, me_roots), or None for the Python loop
+    (harness/compiled_loop.py: "auto" falls back and says why once, "c" raises)."""
+    return LIBRARY.get(loop)
 
 
 class CompiledIntegration:
@@ -116,7 +48,7 @@ class CompiledIntegration:
     def __init__(self, loaded, plan: list, timers: list, blocks: list, x, dx, z, states: int, indicators: int,
                  record, column_bounds, check_every: int, start: float, step: float):
         self.loaded = loaded
-        actions, self._keep = master_loop.plan_actions(plan)
+        actions, self._keep = plan_actions(plan)
         timer_array = (Timer * max(len(timers), 1))()
         for (component, _), entry in zip(timers, timer_array):
             entry.instance, entry.set_time = component.instance_address, component.addresses["set_time"]
@@ -180,4 +112,4 @@ class CompiledIntegration:
         return self.loop.evaluations
 
 
-__all__ = ["CompiledIntegration", "library", "choice", "ENVIRONMENT_SWITCH", "FAILED_FUNCTIONS"]
+__all__ = ["CompiledIntegration", "library", "LIBRARY", "SOURCE"]

@@ -40,20 +40,20 @@ from __future__ import annotations
 
 import ctypes
 import math
-import time as clock
 
 import numpy as np
 
-from . import cvode, me_loop
-from .fmi import MODEL_EXCHANGE, FmiError, ModelExchangeComponent, ModelInfo
-from .master import (DIVERGENCE_CHECK_EVERY, FMI_WARNING, Divergence, Master, RunResult, SimulationFailed,
-                     resolve_fmu, validate)
+from . import compiled_loop, cvode, me_loop
+from .fmi import MODEL_EXCHANGE, ModelExchangeComponent, ModelInfo
+from .loop_interface import FAILED_FUNCTIONS, LoopOutcome
+from .master import DIVERGENCE_CHECK_EVERY, FMI_WARNING, Divergence, Master, RunResult
 from .scenario import Scenario, ScenarioError
+from .scenario_checks import resolve_fmu
 
 ALGORITHM = "me"
 INTEGRATOR = "CVODE BDF (SUNDIALS, dense difference-quotient Jacobian)"
-#: ITAE, IAE, Ec within 0.004 % of the converged co-simulation in all 13 cases at this tolerance; at 1e-8 the
-#: motor arm is 0.06 % off (docs/model_exchange_accuracy.md), and 1e-10 costs 30-80 % more CPU than 1e-8
+#: the loosest tolerance of the ladder at which every case's ITAE, IAE and Ec agree with the converged
+#: co-simulation (docs/model_exchange_accuracy.md says how closely, and what a tighter one costs)
 DEFAULT_RTOL = 1e-10
 MAX_EVENT_PASSES = 100  # event iteration: passes before the master gives up (a model that never settles)
 _DOUBLE = ctypes.sizeof(ctypes.c_double)
@@ -88,20 +88,21 @@ def model_exchange_info(name: str, path) -> ModelInfo:
 
 
 class ModelExchangeMaster(Master):
-    """Instantiate, initialise and integrate the FMUs of one scenario in Model Exchange."""
+    """Instantiate, initialise and integrate the FMUs of one scenario in Model Exchange: the life cycle
+    of :meth:`Master.run`, with CVODE's integration and the events as its loop."""
+
+    ALGORITHMS = (ALGORITHM,)
+    RUN_ERRORS = (*Master.RUN_ERRORS, IntegrationFailed, cvode.CvodeError)
+    LIBRARY = me_loop.LIBRARY
 
     def __init__(self, scenario: Scenario, fmu_paths: dict | None = None, rtol: float = DEFAULT_RTOL,
                  atol: float | None = None, logging_on: bool = True, loop: str = "auto"):
         self.rtol, self.atol = check_tolerances(rtol, atol)
-        self.scenario, self.algorithm = scenario, ALGORITHM
-        self.infos = {name: model_exchange_info(name, resolve_fmu(spec.fmu, scenario, fmu_paths))
-                      for name, spec in scenario.components.items()}
-        validate(scenario, self.infos)
-        self.logging_on = logging_on
-        self.loop = me_loop.choice(loop)
-        self._compiled_loop = me_loop.library(self.loop)  # resolved before any FMU is instantiated
-        self.components: dict[str, ModelExchangeComponent] = {}
+        super().__init__(scenario, ALGORITHM, fmu_paths, logging_on, loop)
         self.statistics: dict = {}
+
+    def _model_info(self, name: str, fmu_paths: dict | None) -> ModelInfo:
+        return model_exchange_info(name, resolve_fmu(self.scenario.components[name].fmu, self.scenario, fmu_paths))
 
     # ------------------------------------------------------------ messages
     def _divergence_text(self, time: float, what: str) -> str:
@@ -195,76 +196,61 @@ class ModelExchangeMaster(Master):
                     block.component.fail("fmi2SetContinuousStates", status, time)
         self._propagate(plan, time)
 
-    # ------------------------------------------------------------ the run
-    def run(self, progress=None, progress_every: int = 0) -> RunResult:
-        """Integrate the scenario; on failure raise SimulationFailed holding the rows recorded so far."""
-        if isinstance(progress_every, bool) or not isinstance(progress_every, int) or progress_every < 0:
-            raise ValueError(f"progress_every = {progress_every!r}: a whole number of rows >= 0 (0: rows // 200)")
-        scenario = self.scenario
-        rows, step, start = scenario.steps + 1, scenario.step, scenario.start
-        stop = start + scenario.steps * step
-        wall_start = clock.perf_counter()
-        record = None
-        self.rows_done = 0
+    # ------------------------------------------------------------ the run (Master.run's steps)
+    def _progress_units(self) -> tuple:
+        return "rows", self.scenario.steps + 1
+
+    def _begin_run(self):
         self.events = {"state": 0, "time": 0, "step": 0}
         self.statistics = {}
         self.solver = None
-        try:
-            for name in scenario.components:
-                self.components[name] = ModelExchangeComponent(name, self.infos[name]).instantiate(
-                    logging_on=self.logging_on)
-            for name, spec in scenario.components.items():
-                component = self.components[name]
-                component.setup(start, stop)
-                component.set_parameters(spec.parameters)
-            plan = self._prepare_plan("feedthrough")
-            self._propagate(plan, start)  # consistent initial inputs, in dependency order
-            for component in self.components.values():
-                component.exit_initialization()
-            # the initial event iteration (FMI: event mode after initialisation), then continuous time
-            _, next_time = self._event_iteration(plan, start)
-            for component in self.components.values():
-                component.enter_continuous_time_mode()
-            self._layout()
-            self._read_states(self.x)
-            record = np.empty((rows, len(self.plan_columns)))
-            absolute = [self.atol * n for n in self._nominals()] if self.states else [self.atol]
-            compiled = None
-            if self._compiled_loop is not None:
-                compiled = me_loop.CompiledIntegration(self._compiled_loop, plan, self.timers, self.blocks, self.x,
-                                                       self.dx, self.z, self.states, self.indicators, record,
-                                                       self.column_bounds, DIVERGENCE_CHECK_EVERY, start, step)
-            self.solver = cvode.Cvode(
-                max(self.states, 1), start, self.x, self.rtol, absolute,
-                rhs=self._python_rhs if compiled is None else compiled.rhs,
-                roots=self._python_roots if compiled is None else compiled.roots, indicators=self.indicators,
-                user_data=None if compiled is None else compiled.user_data, stop=stop)
-            if compiled is not None:
-                compiled.attach(self.solver)
-            loop_start = clock.perf_counter()
-            self._record_row(plan, record, 0, start, self.x)
-            self.rows_done = 1
-            self._integrate(plan, compiled, record, next_time, stop, progress, progress_every or max(1, rows // 200))
-            self._check_bound(record, max(0, self.rows_done - DIVERGENCE_CHECK_EVERY - 1), self.rows_done,
-                              self.column_bounds)
-            self.loop_s = clock.perf_counter() - loop_start
-            if progress is not None:
-                progress(rows - 1, rows - 1)
-        except (FmiError, Divergence, ScenarioError, IntegrationFailed, cvode.CvodeError) as error:
-            self._finish_statistics()
-            result = self._result(record, self.rows_done, clock.perf_counter() - wall_start, complete=False)
-            if isinstance(error, ScenarioError) and record is None:
-                raise
-            raise SimulationFailed(str(error), result, error) from error
-        finally:
-            self._finish_statistics()
-            self.logs = {name: component.log for name, component in self.components.items()}
-            for component in self.components.values():
-                component.free()
-            self.components = {}
-            if self.solver is not None:
-                self.solver.close()
-        return self._result(record, self.rows_done, clock.perf_counter() - wall_start, complete=True)
+
+    def _instantiate(self, name: str) -> ModelExchangeComponent:
+        return ModelExchangeComponent(name, self.infos[name]).instantiate(logging_on=self.logging_on)
+
+    def _initialise(self, plan: list) -> list:
+        """Out of initialisation mode, the initial event iteration (FMI: event mode after initialisation),
+        then continuous-time mode, the state layout and the initial states."""
+        for component in self.components.values():
+            component.exit_initialization()
+        _, self._next_time = self._event_iteration(plan, self.scenario.start)
+        for component in self.components.values():
+            component.enter_continuous_time_mode()
+        self._layout()
+        self._read_states(self.x)
+        return plan
+
+    def _before_loop(self, plan: list, record):
+        """The integrator over every FMU's states, with the compiled loop's functions when there is one."""
+        scenario = self.scenario
+        start, step = scenario.start, scenario.step
+        absolute = [self.atol * n for n in self._nominals()] if self.states else [self.atol]
+        compiled = None
+        if self._compiled_loop is not None:
+            compiled = me_loop.CompiledIntegration(self._compiled_loop, plan, self.timers, self.blocks, self.x,
+                                                   self.dx, self.z, self.states, self.indicators, record,
+                                                   self.column_bounds, DIVERGENCE_CHECK_EVERY, start, step)
+        self.solver = cvode.Cvode(
+            max(self.states, 1), start, self.x, self.rtol, absolute,
+            rhs=self._python_rhs if compiled is None else compiled.rhs,
+            roots=self._python_roots if compiled is None else compiled.roots, indicators=self.indicators,
+            user_data=None if compiled is None else compiled.user_data, stop=start + scenario.steps * step)
+        if compiled is not None:
+            compiled.attach(self.solver)
+        self._compiled = compiled
+
+    def _loop(self, plan: list, record, progress, every: int):
+        """Row 0 at the start, then rows 1 .. rows - 1 by the integration."""
+        scenario = self.scenario
+        self._record_row(plan, record, 0, scenario.start, self.x)
+        self.rows_done = 1
+        self._integrate(plan, self._compiled, record, self._next_time, scenario.start + scenario.steps * scenario.step,
+                        progress, every)
+
+    def _end_run(self):
+        self._finish_statistics()
+        if self.solver is not None:
+            self.solver.close()
 
     def _finish_statistics(self):
         if self.solver is None or self.statistics:
@@ -275,6 +261,7 @@ class ModelExchangeMaster(Master):
                            "loop": "python" if self._compiled_loop is None else "compiled"}
 
     def _result(self, record, rows: int, wall_s: float, complete: bool) -> RunResult:
+        self._finish_statistics()  # a failed run's too, before the solver is closed
         result = super()._result(record, rows, wall_s, complete)
         result.solver = dict(self.statistics) or None
         return result
@@ -354,31 +341,31 @@ class ModelExchangeMaster(Master):
     def _compiled_outcome(self, outcome, compiled, plan: list, record) -> tuple:
         """(flag or None, time reached) of a compiled block; what stopped it raised as the Python loop raises."""
         kind = outcome.outcome
-        if kind == me_loop.LOOP_DONE:
+        if kind == LoopOutcome.DONE:
             return None, None
-        if kind == me_loop.LOOP_EVENT:
+        if kind == LoopOutcome.EVENT:
             return outcome.status, outcome.time
-        if kind == me_loop.LOOP_SOLVER_FAILED:
+        if kind == LoopOutcome.SOLVER_FAILED:
             failure = compiled.loop.failure  # the evaluation that made CVODE fail, if one did
             self._raise_failure(failure.outcome, failure, plan)
             self._evaluation_error = None
             self._stop_failed(outcome.status)
-        if kind == me_loop.LOOP_RECORD_DIVERGED:
+        if kind == LoopOutcome.RECORD_DIVERGED:
             self._check_bound(record, self.rows_done - DIVERGENCE_CHECK_EVERY, self.rows_done, self.column_bounds)
         self._raise_failure(kind, outcome, plan)
         raise RuntimeError(f"the compiled Model Exchange loop stopped at row {outcome.row} for no reason the "
-                           f"Python loop knows (outcome {kind}); rerun with {me_loop.ENVIRONMENT_SWITCH}=python")
+                           f"Python loop knows (outcome {kind}); rerun with {compiled_loop.ENVIRONMENT_SWITCH}=python")
 
     def _raise_failure(self, kind: int, where, plan: list):
         """Raise the FmiError or Divergence of a failure ``kind`` at ``where`` (an Outcome)."""
-        if kind == me_loop.LOOP_WRITE_DIVERGED:
+        if kind == LoopOutcome.WRITE_DIVERGED:
             self._diverged_on_write(plan[where.index], where.copy, where.value, where.time)  # raises Divergence
-        function = me_loop.FAILED_FUNCTIONS.get(kind)
+        function = FAILED_FUNCTIONS.get(kind)
         if function is None:
             return
-        if kind in (me_loop.LOOP_READ_FAILED, me_loop.LOOP_WRITE_FAILED):
+        if kind in (LoopOutcome.READ_FAILED, LoopOutcome.WRITE_FAILED):
             component = plan[where.index].component
-        elif kind == me_loop.LOOP_SET_TIME_FAILED:
+        elif kind == LoopOutcome.SET_TIME_FAILED:
             component = self.timers[where.index][0]
         else:
             component = self.blocks[where.index].component

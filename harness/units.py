@@ -11,7 +11,7 @@ import functools
 
 from fmpy import read_model_description
 
-from .master import resolve_fmu
+from .scenario_checks import resolve_fmu
 
 #: controller outputs in the unit of u: the control itself, the rule weights and the error estimate
 IN_UNITS_OF_U = ("u", "theta", "w_hat")

@@ -16,8 +16,8 @@ Rules (docs/architecture.md draws them):
   harness/studies/tune/ takes its place in the chain;
 * ``build_native`` never reaches ``build_fmu`` (``build_fmu`` may import ``build_native``), and
   the masters' compiled loops reach no FMU build and no FMU source: ``harness.master_loop`` and
-  ``harness.me_loop`` import only the C toolchain helper (and the core beside them), which imports
-  no project module.
+  ``harness.me_loop`` (with their loader ``harness.compiled_loop`` and ``harness.loop_interface``)
+  import only the C toolchain helper (and the core beside them), which imports no project module.
 
 Every rule is also run on small synthetic source trees that break it, so each check is seen to fail.
 """
@@ -34,8 +34,9 @@ TOP_LEVEL_MODULES = ("build_fmu", "build_native", "fmu_catalog", "c_toolchain")
 PACKAGES = ("harness", "plants", "fmu_src")
 #: the co-simulation core at the top of harness/ (docs/architecture.md); anything else goes in a sub-package
 CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harness.scenario", "harness.variants",
-        "harness.fmi", "harness.master", "harness.master_loop", "harness.scores", "harness.cases",
-        "harness.units", "harness.me_master", "harness.me_loop", "harness.cvode", "harness.scenario_toml"}
+        "harness.fmi", "harness.scenario_checks", "harness.master", "harness.compiled_loop", "harness.loop_interface",
+        "harness.master_loop", "harness.scores", "harness.cases", "harness.units", "harness.me_master",
+        "harness.me_loop", "harness.cvode", "harness.scenario_toml"}
 COMPOSITION_ROOT = "harness.cli"
 STUDIES, HOSTS = "harness.studies", "harness.hosts"
 #: what the master's compiled loop may never reach, directly or through other modules
@@ -232,7 +233,7 @@ def violations(root: Path = ROOT) -> list:
                             "harness/studies/ or harness/hosts/ (or add it to the core deliberately)")
     if "build_fmu" in reachable(imports, "build_native"):
         problems.append("build_native reaches build_fmu (build_fmu may import build_native, not the reverse)")
-    for loop in ("harness.master_loop", "harness.me_loop"):
+    for loop in ("harness.master_loop", "harness.me_loop", "harness.compiled_loop", "harness.loop_interface"):
         if loop not in files:
             continue
         reached = reachable(imports, loop)
@@ -258,7 +259,8 @@ def test_the_graph_sees_the_imports_it_must_see():
     """A sanity check of the reader itself on the real tree: known imports are found."""
     imports = {(i.source, i.target) for i in import_graph(ROOT)}
     assert ("harness.master", "harness.master_loop") in imports
-    assert ("harness.master_loop", "c_toolchain") in imports
+    assert ("harness.master_loop", "harness.compiled_loop") in imports
+    assert ("harness.compiled_loop", "c_toolchain") in imports
     assert ("build_fmu", "build_native") in imports
     assert ("harness.cli", "harness.studies.tables") in imports
     assert ("harness.hosts.matrix", "harness.studies.step_study") in imports
@@ -280,7 +282,8 @@ def _tree(root: Path, files: dict) -> Path:
 
 GOOD = {"harness/scenario.py": "import math\n",
         "harness/master.py": "from . import master_loop\nfrom .scenario import math\n",
-        "harness/master_loop.py": "import c_toolchain\n",
+        "harness/master_loop.py": "from . import compiled_loop\n",
+        "harness/compiled_loop.py": "import c_toolchain\n",
         "harness/cli.py": "from .studies import tables\nfrom .hosts import matrix\n",
         "harness/studies/tables.py": "from .. import master\n",
         "harness/hosts/matrix.py": "from ..studies.tables import master\nfrom . import matrix_report\n\n\n"
@@ -316,6 +319,7 @@ def test_a_tree_that_keeps_the_rules_passes(tmp_path):
     ("harness/studies/tables.py", "from .. import master\nfrom ..hosts import matrix\n",
      "harness.studies.tables (studies) imports harness.hosts.matrix (hosts)"),
     ("harness/master_loop.py", "import build_native\n", "harness.master_loop reaches build_native"),
+    ("harness/compiled_loop.py", "import c_toolchain\nimport build_fmu\n", "harness.master_loop reaches build_fmu"),
     ("c_toolchain.py", "import fmu_catalog\n", "c_toolchain imports project modules fmu_catalog"),
     ("harness/sweep.py", "import math\n", "harness/sweep.py: not part of the co-simulation core"),
     ("harness/studies/tune/errors.py", "from .space import x\n",

@@ -19,8 +19,9 @@ import pytest
 
 import build_native
 import c_toolchain
-from harness import master_loop
+from harness import compiled_loop, master_loop
 from harness import scenario as scenarios
+from harness.loop_interface import ACTION_READ, ACTION_WRITE, Action, LoopOutcome, Outcome, Stepper
 from harness.master import Master, SimulationFailed
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
@@ -61,18 +62,18 @@ class FakeSystem:
         self.source_index = (ctypes.c_size_t * 2)(1, 0)
         self.bounds = (ctypes.c_double * 2)(bound, bound2)
         get_address, set_address, step_address = (ctypes.cast(c, ctypes.c_void_p).value for c in self._callbacks)
-        actions = (master_loop.Action * 3)()
+        actions = (Action * 3)()
         for entry, (kind, instance, call, refs, values, first, recorded) in zip(actions, [
-                (master_loop.ACTION_READ, 1, get_address, self.a_refs, self.a_values, 1, 1),
-                (master_loop.ACTION_WRITE, 2, set_address, self.b_in_refs, self.b_in_values, 0, 0),
-                (master_loop.ACTION_READ, 2, get_address, self.b_refs, self.b_values, 0, 1)]):
+                (ACTION_READ, 1, get_address, self.a_refs, self.a_values, 1, 1),
+                (ACTION_WRITE, 2, set_address, self.b_in_refs, self.b_in_values, 0, 0),
+                (ACTION_READ, 2, get_address, self.b_refs, self.b_values, 0, 1)]):
             entry.kind, entry.fmi_version, entry.instance, entry.call = kind, fmi_version, instance, call
             entry.references, entry.count, entry.values = ctypes.addressof(refs), len(values), ctypes.addressof(values)
             entry.first_column, entry.recorded = first, recorded
         actions[1].sources = ctypes.addressof(self.sources)
         actions[1].source_index = ctypes.addressof(self.source_index)
         actions[1].bounds = ctypes.addressof(self.bounds)
-        steppers = (master_loop.Stepper * 2)()
+        steppers = (Stepper * 2)()
         for entry, instance in zip(steppers, (1, 2)):
             entry.fmi_version, entry.instance, entry.do_step = fmi_version, instance, step_address
         self.actions, self.steppers = actions, steppers
@@ -114,9 +115,9 @@ class FakeSystem:
         self.trace.append((f"step{name}", time, step))
         return self._status(f"step{name}")
 
-    def run(self, first_row: int, last_row: int, start=0.1, step=0.0005, check_every=4) -> master_loop.Outcome:
-        function = master_loop.library("c")
-        outcome = master_loop.Outcome()
+    def run(self, first_row: int, last_row: int, start=0.1, step=0.0005, check_every=4) -> Outcome:
+        function = master_loop.library("c").master_loop_run
+        outcome = Outcome()
         function(self.actions, 3, self.steppers, 2, start, step, first_row, last_row,
                  self.record.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 2,
                  ctypes.cast(self.column_bounds, ctypes.POINTER(ctypes.c_double)), check_every, ctypes.byref(outcome))
@@ -128,7 +129,7 @@ def test_the_c_loop_makes_the_calls_of_the_python_loop_in_its_order(fmi_version)
     rows = 100  # start + n * step, not fma(n, step, start): 30 of these 100 times differ in the last bit
     system = FakeSystem(fmi_version, rows=rows)
     outcome = system.run(0, rows, start=0.1, step=0.0005)
-    assert outcome.outcome == master_loop.LOOP_DONE
+    assert outcome.outcome == LoopOutcome.DONE
     expected = []
     for n in range(rows):
         t = 0.1 + n * 0.0005  # the time exactly as Python computes it
@@ -142,17 +143,17 @@ def test_the_c_loop_makes_the_calls_of_the_python_loop_in_its_order(fmi_version)
 @pytest.mark.parametrize("fmi_version", [2, 3])
 @pytest.mark.parametrize("status", [2, 3, 4])  # discard, error, fatal
 @pytest.mark.parametrize("call, outcome_kind, action, rows_recorded", [
-    ("getA", master_loop.LOOP_READ_FAILED, 0, 2),
-    ("setB", master_loop.LOOP_WRITE_FAILED, 1, 2),
-    ("getB", master_loop.LOOP_READ_FAILED, 2, 2),
-    ("stepA", master_loop.LOOP_STEP_FAILED, 0, 3),
-    ("stepB", master_loop.LOOP_STEP_FAILED, 1, 3),
+    ("getA", LoopOutcome.READ_FAILED, 0, 2),
+    ("setB", LoopOutcome.WRITE_FAILED, 1, 2),
+    ("getB", LoopOutcome.READ_FAILED, 2, 2),
+    ("stepA", LoopOutcome.STEP_FAILED, 0, 3),
+    ("stepB", LoopOutcome.STEP_FAILED, 1, 3),
 ])
 def test_an_fmi_error_stops_the_block_where_the_python_loop_stops(fmi_version, status, call, outcome_kind, action,
                                                                    rows_recorded):
     system = FakeSystem(fmi_version, rows=6, fail=(call, 2, status))
     outcome = system.run(0, 6)
-    assert (outcome.outcome, outcome.row, outcome.action, outcome.status) == (outcome_kind, 2, action, status)
+    assert (outcome.outcome, outcome.row, outcome.index, outcome.status) == (outcome_kind, 2, action, status)
     assert system.trace[-1][0] == call  # nothing is called after the failing call
     assert (system.record[:rows_recorded] != -1).all() and (system.record[rows_recorded:] == -1).all()
 
@@ -160,7 +161,7 @@ def test_an_fmi_error_stops_the_block_where_the_python_loop_stops(fmi_version, s
 @pytest.mark.parametrize("call", ["getA", "setB", "getB", "stepA", "stepB"])
 def test_a_warning_does_not_stop_the_loop(call):
     system = FakeSystem(2, rows=4, fail=(call, 1, 1))
-    assert system.run(0, 4).outcome == master_loop.LOOP_DONE
+    assert system.run(0, 4).outcome == LoopOutcome.DONE
     assert len(system.trace) == 4 * 5
 
 
@@ -168,7 +169,7 @@ def test_a_warning_does_not_stop_the_loop(call):
 def test_a_value_beyond_its_bound_never_reaches_the_input(value):
     system = FakeSystem(2, rows=6, a1_override=(3, value), bound=10.0)
     outcome = system.run(0, 6)
-    assert (outcome.outcome, outcome.row, outcome.action, outcome.copy) == (master_loop.LOOP_WRITE_DIVERGED, 3, 1, 0)
+    assert (outcome.outcome, outcome.row, outcome.index, outcome.copy) == (LoopOutcome.WRITE_DIVERGED, 3, 1, 0)
     assert outcome.value == value or (math.isnan(value) and math.isnan(outcome.value))
     assert system.trace[-1] == ("getA", [7, 8])  # setB was not called with it
     assert all(entry[1] == entry[1] and abs(entry[1]) < 10 for entry in system.trace if entry[0] == "setB")
@@ -178,15 +179,15 @@ def test_every_input_of_a_write_is_checked_against_its_own_bound():
     # B's second input (A.a0 = row + 0.25) has bound 3.5: row 4 (4.25) stops; the first input's bound is 1e6
     system = FakeSystem(2, rows=8, bound2=3.5)
     outcome = system.run(0, 8)
-    assert (outcome.outcome, outcome.row, outcome.action, outcome.copy, outcome.value) == (
-        master_loop.LOOP_WRITE_DIVERGED, 3 + 1, 1, 1, 4.25)
+    assert (outcome.outcome, outcome.row, outcome.index, outcome.copy, outcome.value) == (
+        LoopOutcome.WRITE_DIVERGED, 3 + 1, 1, 1, 4.25)
 
 
 def test_a_recorded_value_beyond_its_bound_stops_at_the_end_of_its_check_block():
     # a0 = row + 0.25 passes 5 at row 5; with blocks of 4 rows the check at the end of rows 4..7 finds it
     system = FakeSystem(2, rows=10, record_bounds=(1e6, 5.0))
     outcome = system.run(0, 10, check_every=4)
-    assert (outcome.outcome, outcome.row) == (master_loop.LOOP_RECORD_DIVERGED, 7)
+    assert (outcome.outcome, outcome.row) == (LoopOutcome.RECORD_DIVERGED, 7)
     assert [entry[0] for entry in system.trace[-3:]] == ["getA", "setB", "getB"]  # row 7 not stepped
 
 
@@ -195,16 +196,16 @@ def test_every_row_of_a_check_block_is_checked(row, stop_row):
     system = FakeSystem(2, rows=9, record_bounds=(1e6, 50.0), a0_override=(row, 1e300), bound2=float("inf"))
     outcome = system.run(0, 9, check_every=4)
     if stop_row is None:  # row 8 starts a block that has not ended
-        assert outcome.outcome == master_loop.LOOP_DONE
+        assert outcome.outcome == LoopOutcome.DONE
     else:
-        assert (outcome.outcome, outcome.row) == (master_loop.LOOP_RECORD_DIVERGED, stop_row)
+        assert (outcome.outcome, outcome.row) == (LoopOutcome.RECORD_DIVERGED, stop_row)
 
 
 def test_blocks_continue_where_the_last_one_ended():
     whole, parts = FakeSystem(2, rows=7), FakeSystem(2, rows=7)
-    assert whole.run(0, 7).outcome == master_loop.LOOP_DONE
+    assert whole.run(0, 7).outcome == LoopOutcome.DONE
     for first, last in ((0, 3), (3, 4), (4, 7)):
-        assert parts.run(first, last).outcome == master_loop.LOOP_DONE
+        assert parts.run(first, last).outcome == LoopOutcome.DONE
     assert parts.trace == whole.trace
     assert np.array_equal(parts.record, whole.record)
 
@@ -305,17 +306,17 @@ class _FailingComponent:
 
 
 @pytest.mark.parametrize("kind, function, rows_kept", [
-    (master_loop.LOOP_READ_FAILED, "fmi2GetReal", 5), (master_loop.LOOP_WRITE_FAILED, "fmi2SetReal", 5),
-    (master_loop.LOOP_STEP_FAILED, "fmi2DoStep", 6)])
+    (LoopOutcome.READ_FAILED, "fmi2GetReal", 5), (LoopOutcome.WRITE_FAILED, "fmi2SetReal", 5),
+    (LoopOutcome.STEP_FAILED, "fmi2DoStep", 6)])
 def test_what_stops_the_compiled_loop_is_raised_as_the_python_loop_raises_it(kind, function, rows_kept):
     scenario = scenarios.configure("pendulum_case1", "vud", None, 0.01)
     master = Master(scenario, loop="python")
     plan = [dataclasses.make_dataclass("Action", ["component"])(_FailingComponent(f"action{i}")) for i in range(3)]
     components = [_FailingComponent(f"stepper{i}") for i in range(3)]
-    outcome = master_loop.Outcome(outcome=kind, status=2, row=5, action=1)
+    outcome = Outcome(outcome=kind, status=2, row=5, index=1)
     with pytest.raises(RuntimeError):
         master._raise_stop(outcome, plan, components, record=None)
-    failed = components[1] if kind == master_loop.LOOP_STEP_FAILED else plan[1].component
+    failed = components[1] if kind == LoopOutcome.STEP_FAILED else plan[1].component
     assert failed.failed == (function, 2, scenario.start + 5 * scenario.step)
     assert master.rows_done == rows_kept  # a failed read or write: row 5 is not recorded; a failed step: it is
 
@@ -330,25 +331,25 @@ def test_auto_falls_back_to_the_python_loop_when_the_library_cannot_be_built(mon
     def broken(*args, **kwargs):
         raise c_toolchain.NativeBuildError("compiling master_loop failed:\nerror: no space left")
 
-    monkeypatch.setattr(master_loop, "_library", None)
-    monkeypatch.setattr(master_loop, "_unavailable", None)
+    monkeypatch.setattr(master_loop.LIBRARY, "loaded", None)
+    monkeypatch.setattr(master_loop.LIBRARY, "unavailable", None)
     monkeypatch.setattr(c_toolchain, "host_library", broken)
-    monkeypatch.delenv(master_loop.ENVIRONMENT_SWITCH, raising=False)
+    monkeypatch.delenv(compiled_loop.ENVIRONMENT_SWITCH, raising=False)
     assert master_loop.library() is None
     assert capsys.readouterr().err == ("warning: the master runs its Python loop: the compiled loop master_loop.c "
                                        "cannot be built or loaded: compiling master_loop failed:\n")
     assert master_loop.library() is None and capsys.readouterr().err == ""  # said once
-    with pytest.raises(master_loop.LoopUnavailable, match="AFC_MASTER_LOOP=c: the compiled loop master_loop.c"):
+    with pytest.raises(compiled_loop.LoopUnavailable, match="AFC_MASTER_LOOP=c: the compiled loop master_loop.c"):
         master_loop.library("c")
 
 
 def test_the_loop_can_be_chosen(monkeypatch):
     scenario = scenarios.configure("pendulum_case1", "vud", None, 0.01)
-    monkeypatch.setenv(master_loop.ENVIRONMENT_SWITCH, "python")
+    monkeypatch.setenv(compiled_loop.ENVIRONMENT_SWITCH, "python")
     assert master_loop.library() is None
     assert Master(scenario, loop="c").loop == "c"  # the argument wins over the environment
-    monkeypatch.setenv(master_loop.ENVIRONMENT_SWITCH, "fast")
-    with pytest.raises(master_loop.LoopUnavailable, match="AFC_MASTER_LOOP='fast' is not valid; valid: auto, python, c"):
+    monkeypatch.setenv(compiled_loop.ENVIRONMENT_SWITCH, "fast")
+    with pytest.raises(compiled_loop.LoopUnavailable, match="AFC_MASTER_LOOP='fast' is not valid; valid: auto, python, c"):
         master_loop.library()
     with pytest.raises(ValueError, match="valid: auto, python, c"):
         Master(scenario, loop="cython")

@@ -83,6 +83,23 @@ def test_a_value_beyond_its_bound_stops_both_loops_alike(native, loop):
         assert np.array_equal(python.value.result.values, failure.value.result.values)
 
 
+@pytest.mark.parametrize("loop", ["python", "c"])
+def test_the_model_exchange_master_runs_the_masters_life_cycle(native, loop):
+    """ModelExchangeMaster has no run of its own: Master.run with its steps specialised, its progress in
+    rows; and it is built by Master.__init__ (an unknown parameter is the scenario check's error)."""
+    assert "run" not in vars(ModelExchangeMaster) and "__init__" in vars(ModelExchangeMaster)
+    scenario = scenarios.configure("pendulum_case1", "vud", None, 0.05)
+    with pytest.raises(ValueError, match=r"progress_every = -1: a whole number of rows >= 0 \(0: rows // 200\)"):
+        ModelExchangeMaster(scenario, native, loop=loop).run(progress_every=-1)
+    calls = []
+    result = ModelExchangeMaster(scenario, native, rtol=1e-8, loop=loop).run(
+        progress=lambda done, total: calls.append((done, total)), progress_every=40)
+    assert calls[-1] == (100, 100) and {total for _, total in calls} == {100}  # the steps, in rows - 1
+    assert result.rows == 101 and result.complete
+    with pytest.raises(ScenarioError, match=r"has no parameter 'gama' \(did you mean 'gamma'\?\)"):
+        ModelExchangeMaster(scenario.with_parameter("controller.gama", 1.0), native, loop=loop)
+
+
 # ------------------------------------------------------------------ events
 def test_the_stuck_link_rests_at_exactly_zero_and_breaks_away(native):
     """At rtol 1e-10 the paper's manipulator (vud) sticks near t = 1.573 s and slips again ~48 ms later

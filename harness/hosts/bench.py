@@ -38,8 +38,9 @@ from .. import cli_args, master_loop, variants
 from .. import scenario as scenarios
 from ..cases import default_jobs
 from ..fmi import Component, ModelInfo
-from ..master import Master, resolve_fmu
+from ..master import Master
 from ..me_master import ModelExchangeMaster
+from ..scenario_checks import resolve_fmu
 from ..studies.oracle import simulate_oracle
 from . import engines, ssp
 from .libcosim import run_libcosim, with_algorithm

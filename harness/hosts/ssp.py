@@ -55,9 +55,10 @@ import build_fmu
 from .. import cli_args, variants
 from .. import scenario as scenarios
 from ..fmi import ModelInfo
-from ..master import resolve_fmu, simulate, validate
+from ..master import simulate
 from ..me_master import DEFAULT_RTOL, check_tolerances, model_exchange_info
 from ..scenario import Scenario, ScenarioError
+from ..scenario_checks import resolve_fmu, validate
 from ..studies.step_study import load_convergence, validated_step
 
 NS_SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"

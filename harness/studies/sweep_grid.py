@@ -13,8 +13,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import scenario as scenarios
-from ..master import ALGORITHMS, Master, resolve_fmu
+from ..master import ALGORITHMS, Master
 from ..scenario import Scenario, ScenarioError
+from ..scenario_checks import resolve_fmu
 from ..scores import SCORE_KEYS
 from ..variants import CONTROLLER_VARIANTS
 
