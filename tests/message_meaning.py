@@ -5,13 +5,18 @@ The two editions word their messages alike but write numbers differently: the Py
 ``%.17g`` (``1``, ``0.10000000000000001``, ``1.0000000000000001e-05``). A message's meaning is its
 words, each number replaced by ``#``, and its numbers read back as floats. Two messages say the same
 when their words are equal and their numbers are equal as doubles, bit for bit (any NaN equals any
-NaN: C may write the sign of a NaN, Python never does).
+NaN: a C library may write a NaN's sign, glibc ``-nan`` and Windows' C runtime ``-nan(ind)``; Python
+never does).
 
     >>> meaning("parameter k1 = -1.0 is invalid; valid range: > 0") == meaning(
     ...     "parameter k1 = -1 is invalid; valid range: > 0")
     True
     >>> parameter_error("parameter lambda_ce = 1 is invalid; valid range: (0, 1)")
     ('lambda_ce', 1.0, '(0, 1)')
+    >>> meaning("u = -nan(ind), E = (0.10000000000000001,)") == meaning("u = nan, E = (0.1,)")
+    True
+    >>> meaning("t = 0.005") == meaning("t = 0.0050000000000000001"), meaning("t = 0.005") == meaning("t = 0.00500001")
+    (True, False)
 """
 from __future__ import annotations
 
@@ -21,8 +26,8 @@ import struct
 from dataclasses import dataclass
 
 # a number standing alone: not part of a name (k1, fmi2DoStep, x1) nor followed by letters; the
-# exponent form of both editions (1e-05, 1.0000000000000001e-05); inf, nan and C's -nan
-NUMBER = (r"(?<![\w.])[-+]?(?:(?:\d+(?:\.\d+)?|\.\d+)(?:[eE][-+]?\d+)?|inf|nan)(?!\w|\.\d)")
+# exponent form of both editions (1e-05, 1.0000000000000001e-05); inf, nan and C's -nan, -nan(ind)
+NUMBER = r"(?<![\w.])[-+]?(?:(?:\d+(?:\.\d+)?|\.\d+)(?:[eE][-+]?\d+)?|inf|nan(?:\(ind\))?)(?!\w|\.\d)"
 _NUMBER = re.compile(NUMBER)
 _PARAMETER_ERROR = re.compile(rf"^parameter (\w+) = ({NUMBER}) is invalid; valid range: (.+)$")
 
@@ -50,16 +55,16 @@ def _same_double(a: float, b: float) -> bool:
 def meaning(message: str) -> Meaning:
     """The words and numbers of a message (without the "<instance>: " prefix)."""
     texts = tuple(found.group(0) for found in _NUMBER.finditer(message))
-    return Meaning(_NUMBER.sub("#", message), tuple(float(text) for text in texts), texts)
+    return Meaning(_NUMBER.sub("#", message), tuple(float(text.removesuffix("(ind)")) for text in texts), texts)
 
 
 def parameter_error(message: str) -> tuple | None:
     """(name, value, valid range) of a "parameter NAME = VALUE is invalid; valid range: RANGE" message."""
     found = _PARAMETER_ERROR.match(message)
-    return (found.group(1), float(found.group(2)), found.group(3)) if found else None
+    return (found.group(1), float(found.group(2).removesuffix("(ind)")), found.group(3)) if found else None
 
 
 def written_as_c_does(text: str) -> bool:
     """The number is written as C's %.17g writes it (any sign of a NaN)."""
-    value = float(text)
-    return text.lstrip("-") == "nan" if math.isnan(value) else text == f"{value:.17g}"
+    value = float(text.removesuffix("(ind)"))
+    return text.lstrip("-") in ("nan", "nan(ind)") if math.isnan(value) else text == f"{value:.17g}"

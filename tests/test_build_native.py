@@ -285,11 +285,18 @@ def _fail_message(driven: Driven, call) -> str:
 
 
 def _bad_values(variable):
+    """NaN, inf, each bound itself (exclusive) or one beyond it; for a Real, also values whose text
+    needs 16 and 17 significant digits (bound -/+ 1/3, the next double beyond a nonzero bound)."""
     values = [math.nan, math.inf]
-    if variable.minimum is not None:
-        values.append(variable.minimum - 1.0 if not variable.exclusive_minimum else variable.minimum)
-    if variable.maximum is not None:
-        values.append(variable.maximum + 1.0 if not variable.exclusive_maximum else variable.maximum)
+    for bound, exclusive, outward in ((variable.minimum, variable.exclusive_minimum, -1.0),
+                                      (variable.maximum, variable.exclusive_maximum, 1.0)):
+        if bound is None:
+            continue
+        values.append(bound if exclusive else bound + outward)
+        if variable.kind != "Integer":
+            values.append(bound + outward / 3.0)
+            if bound != 0.0:
+                values.append(math.nextafter(bound, outward * math.inf))
     return values
 
 
