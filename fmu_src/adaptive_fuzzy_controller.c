@@ -16,7 +16,7 @@
  * host sets in event mode at the start time), with no check window and no chatter monitor
  * (both watch co-simulation's communication steps).
  *
- * General form (issue 17): the order n and the number of sets m come from the parameters
+ * General form (docs/general_order.md): the order n and the number of sets m come from the parameters
  * `order` and `sets` when the declaration table has them, else n = 2, m = 2; the rule
  * weights are the table's theta1..thetaN (M = m^n <= N).
  */
@@ -29,7 +29,7 @@
 #include "fmi_layer.h"
 #include "initial_error_latch.h"
 
-/* Host robustness (issue 13): with the table's parameter initial_error, e(0), de(0), ... and the
+/* Host robustness (docs/host_robustness.md): with the table's parameter initial_error, e(0), de(0), ... and the
  * time origin of the modified error come from initial_error_latch (checked over the first
  * doSteps, or pinned by e0, de0, ...), and chatter_monitor watches u; without it, e(0), de(0)
  * are the inputs at the end of initialisation, for good. */
@@ -144,24 +144,20 @@ int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
         q[i] = m->s->values[VRS_q[i]];
     }
     if (lyapunov_p(n, k, q, p) != 0 || !is_positive_definite(n, (const double (*)[MAX_ORDER])p)) {
-        /* as Python prints them: k as a tuple, the polynomial s^n + k1 s^(n-1) + ... + kn */
-        char tuple[256] = "(", polynomial[512];
-        size_t used = 1;
+        /* k as a tuple, the polynomial s^n + k1 s^(n-1) + ... + kn */
+        char tuple[256], polynomial[512];
         int written = snprintf(polynomial, sizeof polynomial, "s^%d", n);
-        for (int i = 0; i < n; i++) {
-            char text[40];
-            py_repr(k[i], text);
-            used += (size_t)snprintf(tuple + used, sizeof tuple - used, "%s%s", i ? ", " : "", text);
+        for (int i = 0; i < n && written >= 0 && (size_t)written < sizeof polynomial; i++) {
             if (n - 1 - i)
-                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %s s^%d", text,
+                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %.17g s^%d", k[i],
                                     n - 1 - i);
             else
-                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %s", text);
+                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %.17g", k[i]);
         }
-        snprintf(tuple + used, sizeof tuple - used, n == 1 ? ",)" : ")");
         snprintf(message, size, "parameters k1..k%d = %s are invalid for order = %d: %s is not Hurwitz (no "
                  "positive definite P in (30)); valid: k with every root of the polynomial in the left "
-                 "half-plane, e.g. the coefficients of (s + 1)^%d", n, tuple, n, polynomial, n);
+                 "half-plane, e.g. the coefficients of (s + 1)^%d", n, numbers_text(tuple, sizeof tuple, k, n, "()"),
+                 n, polynomial, n);
         return MODEL_ERROR;
     }
 #endif
@@ -234,8 +230,23 @@ int model_initialize(ModelInstance *m, double start_time) {
     return MODEL_OK;
 }
 
+/* the outputs are not finite: the error names the time, u, E, the inputs and the latched x(t0) */
+static int fail_outputs_overflow(ModelInstance *m, double u, const double error[], const double e[]) {
+    const InitialErrorLatch *latch = &STATE(m)->latch;
+    int n = STATE(m)->p.order;
+    char modified[256], inputs[256], latched[256];
+    size_t used = 0;
+    inputs[0] = 0;
+    for (int i = 0; i < n && used < sizeof inputs; i++)
+        used += (size_t)snprintf(inputs + used, sizeof inputs - used, "%s%s = %.17g", i ? ", " : "", ERROR_NAMES[i],
+                                 e[i]);
+    return fmu_fail(m, "outputs overflow at t = %.17g: u = %.17g, E = %s from %s (latched at t0 = %.17g: %s); the "
+                    "inputs are out of range or the closed loop diverged", m->s->time, u,
+                    numbers_text(modified, sizeof modified, error, n, "()"), inputs, latch->origin,
+                    numbers_text(latched, sizeof latched, latch->latched, n, "[]"));
+}
+
 int model_compute_outputs(ModelInstance *m) {
-    REPRS;
     ControllerState *state = STATE(m);
     const double *values = m->s->values;
     const ControllerParameters *p = &state->p;
@@ -249,21 +260,7 @@ int model_compute_outputs(ModelInstance *m) {
     double u = controller_output(e, ym, m->s->time, theta, V(m, w_hat), p, error, alpha, xi); /* [9] */
     int finite = isfinite(u);
     for (int i = 0; i < n; i++) finite = finite && isfinite(error[i]);
-    if (!finite) {
-        if (n == 2 && HOST_ROBUST)
-            return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s, dE = %s from e = %s, de = %s "
-                            "(latched e(0), de(0) = [%s, %s]); the inputs are out of range or the closed "
-                            "loop diverged", R(m->s->time), R(u), R(error[0]), R(error[1]), R(e[0]), R(e[1]),
-                            R(state->latch.latched[0]), R(state->latch.latched[1]));
-        if (n == 2)
-            return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s, dE = %s from e = %s, de = %s "
-                            "(latched e(0) = %s, de(0) = %s); the inputs are out of range or the closed "
-                            "loop diverged", R(m->s->time), R(u), R(error[0]), R(error[1]), R(e[0]), R(e[1]),
-                            R(state->latch.latched[0]), R(state->latch.latched[1]));
-        return fmu_fail(m, "outputs overflow at t = %s: u = %s, E = %s from e = %s (latched e(0) = %s); "
-                        "the inputs are out of range or the closed loop diverged",
-                        R(m->s->time), R(u), R(error[0]), R(e[0]), R(state->latch.latched[0]));
-    }
+    if (!finite) return fail_outputs_overflow(m, u, error, e);
     V(m, u) = u;
     for (int i = 0; i < n; i++) {
         m->s->values[MODIFIED_ERROR_VR[i]] = error[i];
@@ -295,8 +292,16 @@ static int watch_initial_error(ModelInstance *m, double time) {
 }
 #endif
 
+/* theta or w_hat would not be finite: the error names the step, tau and E; nothing changes */
+static int fail_adaptation_diverged(ModelInstance *m, double current_time, double step_size, double tau,
+                                    const double error[]) {
+    char modified[256];
+    return fmu_fail(m, "adaptation diverged in doStep(t=%.17g, h=%.17g): tau = %.17g from E = %s; theta and w_hat "
+                    "keep their values at t; the inputs are out of range or the closed loop diverged", current_time,
+                    step_size, tau, numbers_text(modified, sizeof modified, error, STATE(m)->p.order, "()"));
+}
+
 int model_step(ModelInstance *m, double current_time, double step_size) {
-    REPRS;
     ControllerState *state = STATE(m);
 #if HOST_ROBUST
     if (state->latch.open != 0.0 && watch_initial_error(m, current_time) != MODEL_OK) return MODEL_ERROR;
@@ -313,15 +318,7 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     for (int j = 0; j < rules; j++) finite = finite && isfinite(adapted[j]);
     double w_hat = V(m, w_hat);
     if (p->variant == VARIANT_FAE) w_hat += step_size * V(m, gamma_w) * tau;
-    if (!(finite && isfinite(w_hat))) {
-        if (n == 2)
-            return fmu_fail(m, "adaptation diverged in doStep(t=%s, h=%s): tau = %s from E = %s, dE = %s; theta "
-                            "and w_hat keep their values at t; the inputs are out of range or the closed loop "
-                            "diverged", R(current_time), R(step_size), R(tau), R(error[0]), R(error[1]));
-        return fmu_fail(m, "adaptation diverged in doStep(t=%s, h=%s): tau = %s from E = %s; theta and w_hat "
-                        "keep their values at t; the inputs are out of range or the closed loop diverged",
-                        R(current_time), R(step_size), R(tau), R(error[0]));
-    }
+    if (!(finite && isfinite(w_hat))) return fail_adaptation_diverged(m, current_time, step_size, tau, error);
     for (int j = 0; j < rules; j++) values[VRS_theta[j]] = adapted[j];
     V(m, w_hat) = w_hat;
 #if HOST_ROBUST
@@ -330,8 +327,6 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
         chatter_warning(&state->chatter, step_size, message, sizeof message);
         fmu_warn(m, "%s", message);
     }
-#else
-    (void)ERROR_NAMES;
 #endif
     return MODEL_OK;
 }

@@ -124,62 +124,13 @@ void fmu_warn(ModelInstance *m, const char *format, ...) {
     va_end(args);
 }
 
-/* Python's repr(float): the shortest digits that read back to x, in Python's layout
- * (exponent form when the decimal exponent is < -4 or >= 16; "1.0", "inf", "nan"). */
-const char *py_repr(double x, char *buffer) {
-    if (isnan(x)) { strcpy(buffer, "nan"); return buffer; }
-    if (isinf(x)) { strcpy(buffer, x > 0 ? "inf" : "-inf"); return buffer; }
-    if (x == 0.0) { strcpy(buffer, signbit(x) ? "-0.0" : "0.0"); return buffer; }
-    char scientific[40];
-    int precision;
-    for (precision = 0; precision < 17; precision++) {
-        snprintf(scientific, sizeof scientific, "%.*e", precision, x);
-        if (strtod(scientific, NULL) == x) break;
-    }
-    /* scientific = [-]d[.ddd]e[+-]XX */
-    char digits[24];
-    size_t n = 0;
-    const char *c = scientific;
-    int negative = 0;
-    if (*c == '-') { negative = 1; c++; }
-    for (; *c && *c != 'e'; c++)
-        if (*c >= '0' && *c <= '9') digits[n++] = *c;
-    digits[n] = 0;
-    int exponent = atoi(c + 1);
-    while (n > 1 && digits[n - 1] == '0') digits[--n] = 0;
-    char *out = buffer;
-    if (negative) *out++ = '-';
-    if (exponent < -4 || exponent >= 16) {
-        *out++ = digits[0];
-        if (n > 1) { *out++ = '.'; memcpy(out, digits + 1, n - 1); out += n - 1; }
-        sprintf(out, "e%c%02d", exponent < 0 ? '-' : '+', exponent < 0 ? -exponent : exponent);
-    } else if (exponent < 0) {
-        *out++ = '0'; *out++ = '.';
-        for (int i = 0; i < -exponent - 1; i++) *out++ = '0';
-        memcpy(out, digits, n); out += n; *out = 0;
-    } else {
-        for (int i = 0; i <= exponent; i++) *out++ = (size_t)i < n ? digits[i] : '0';
-        *out++ = '.';
-        if ((size_t)exponent + 1 < n) { memcpy(out, digits + exponent + 1, n - exponent - 1); out += n - exponent - 1; }
-        else *out++ = '0';
-        *out = 0;
-    }
+const char *numbers_text(char *buffer, size_t size, const double x[], int n, const char *brackets) {
+    size_t used = (size_t)snprintf(buffer, size, "%c", brackets[0]);
+    for (int i = 0; i < n && used < size; i++)
+        used += (size_t)snprintf(buffer + used, size - used, "%s%.17g", i ? ", " : "", x[i]);
+    if (used < size) /* a tuple of one: "(a,)" */
+        snprintf(buffer + used, size - used, "%s%c", n == 1 && brackets[0] == '(' ? "," : "", brackets[1]);
     return buffer;
-}
-
-const char *repr_in(Reprs *reprs, double x) {
-    char *buffer = reprs->text[reprs->used];
-    reprs->used = (reprs->used + 1) % (int)(sizeof reprs->text / sizeof reprs->text[0]);
-    return py_repr(x, buffer);
-}
-
-/* a variable's value as the Python edition prints it: int for Integer variables */
-static const char *value_repr(int vr, double value, char *buffer) {
-    if (MODEL_VARIABLES[vr].is_integer && isfinite(value) && value == floor(value)) {
-        snprintf(buffer, 40, "%.0f", value);
-        return buffer;
-    }
-    return py_repr(value, buffer);
 }
 
 /* --------------------------------------------------------------- validation */
@@ -191,10 +142,8 @@ static int check_variable(int vr, double value, char *message, size_t size) {
     if (!bad && v->is_integer && value != floor(value)) bad = 1;
     if (!bad && v->has_minimum) bad = v->exclusive_minimum ? value <= v->minimum : value < v->minimum;
     if (!bad && v->has_maximum) bad = v->exclusive_maximum ? value >= v->maximum : value > v->maximum;
-    char text[40];
     if (bad)
-        snprintf(message, size, "parameter %s = %s is invalid; valid range: %s", v->name,
-                 value_repr(vr, value, text), v->valid_range);
+        snprintf(message, size, "parameter %s = %.17g is invalid; valid range: %s", v->name, value, v->valid_range);
     return bad;
 }
 
@@ -308,7 +257,6 @@ static int refresh_outputs(ModelInstance *m) {
  * a step >= 0; a refused doStep changes nothing and returns Discard (the wording and rules of
  * afc_slave_base.TableSlave._refuse_step) */
 static Status do_step(ModelInstance *m, double current_time, double step_size, const char *call) {
-    REPRS;
     double time = m->s->time;
     if (m->model_exchange) {
         fmu_fail(m, "%s is a co-simulation function; this instance was instantiated for model exchange", call);
@@ -327,13 +275,13 @@ static Status do_step(ModelInstance *m, double current_time, double step_size, c
         else if (!(step_size >= 0.0))
             rule = "the communication step must be >= 0";
         else {
-            snprintf(expected, sizeof expected, "expected currentCommunicationPoint = %s, the FMU's time (where "
-                     "the last step ended, or the time of the state restored by " SET_STATE_CALL "); a step "
-                     "must start there", R(time));
+            snprintf(expected, sizeof expected, "expected currentCommunicationPoint = %.17g, the FMU's time "
+                     "(where the last step ended, or the time of the state restored by " SET_STATE_CALL "); a step "
+                     "must start there", time);
             rule = expected;
         }
-        fmu_fail(m, "%s(currentCommunicationPoint = %s, communicationStepSize = %s) refused: %s; state and time "
-                 "unchanged", call, R(current_time), R(step_size), rule);
+        fmu_fail(m, "%s(currentCommunicationPoint = %.17g, communicationStepSize = %.17g) refused: %s; state and "
+                 "time unchanged", call, current_time, step_size, rule);
         return STATUS_DISCARD;
     }
     if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return STATUS_ERROR;
@@ -404,24 +352,21 @@ static Status get_values(ModelInstance *m, const unsigned *vr, size_t n, double 
 /* TableSlave._reject: outputs are never set; after terminate nothing; parameters (variability
  * fixed) only before exitInitializationMode; NaN and inf never */
 static int settable(ModelInstance *m, unsigned vr, double value, const char *call) {
-    REPRS;
     const VariableInfo *v = &MODEL_VARIABLES[vr];
-    char text[40], kept[40];
     if (v->causality == CAUSALITY_OUTPUT) {
         fmu_fail(m, "%s is an output and cannot be set", v->name);
         return 0;
     }
     if (m->mode == MODE_TERMINATED) {
-        fmu_fail(m, "%s: %s = %s refused: the FMU was terminated (" TERMINATE_CALL "); no variable can be set "
-                 "after " TERMINATE_CALL, call, v->name, value_repr((int)vr, value, text));
+        fmu_fail(m, "%s: %s = %.17g refused: the FMU was terminated (" TERMINATE_CALL "); no variable can be "
+                 "set after " TERMINATE_CALL, call, v->name, value);
         return 0;
     }
     if (v->causality == CAUSALITY_PARAMETER) {
         if (m->mode & INITIALIZED_MODES) {
-            fmu_fail(m, "%s: %s = %s refused at t = %s: %s is a parameter of variability fixed, which can be set "
-                     "only before " EXIT_INIT_CALL " (it keeps %s); in %s only inputs can be set", call,
-                     v->name, value_repr((int)vr, value, text), R(m->s->time), v->name,
-                     value_repr((int)vr, m->s->values[vr], kept),
+            fmu_fail(m, "%s: %s = %.17g refused at t = %.17g: %s is a parameter of variability fixed, which can be "
+                     "set only before " EXIT_INIT_CALL " (it keeps %.17g); in %s only inputs can be set", call,
+                     v->name, value, m->s->time, v->name, m->s->values[vr],
                      m->mode == MODE_STEP ? "step mode" : "event and continuous-time mode");
             return 0;
         }
@@ -434,7 +379,7 @@ static int settable(ModelInstance *m, unsigned vr, double value, const char *cal
         return 1;
     }
     if (!isfinite(value)) {
-        fmu_fail(m, "input %s = %s is not finite", v->name, R(value));
+        fmu_fail(m, "input %s = %.17g is not finite", v->name, value);
         return 0;
     }
     return 1;
@@ -591,15 +536,14 @@ static Status me_set_states(ModelInstance *m, const double x[], size_t nx, const
 }
 
 static Status me_get_derivatives(ModelInstance *m, double dx[], size_t nx, const char *call) {
-    REPRS;
     ME_CHECK(call, ME_READ_MODES);
     if (!me_count(m, nx, N_STATES, "derivatives", call)) return STATUS_ERROR;
     if (refresh_outputs(m) != MODEL_OK || model_get_derivatives(m, dx) != MODEL_OK) return STATUS_ERROR;
     for (size_t i = 0; i < nx; i++)
         if (!isfinite(dx[i])) {
-            fmu_fail(m, "%s: %s = %s at t = %s: the state or the inputs are out of range (the host's solver may "
-                     "have stepped too far, or the closed loop diverged)", call,
-                     EXTRA_NAMES[i], R(dx[i]), R(m->s->time));
+            fmu_fail(m, "%s: %s = %.17g at t = %.17g: the state or the inputs are out of range (the host's solver "
+                     "may have stepped too far, or the closed loop diverged)", call, EXTRA_NAMES[i], dx[i],
+                     m->s->time);
             return STATUS_ERROR;
         }
     return STATUS_OK;
@@ -649,10 +593,9 @@ static Status me_completed_integrator_step(ModelInstance *m, const char *call) {
 }
 
 static Status me_set_time(ModelInstance *m, double time, const char *call) {
-    REPRS;
     ME_CHECK(call, MODE_EVENT | MODE_CONTINUOUS);
     if (!isfinite(time)) {
-        fmu_fail(m, "%s(%s) refused: the time must be finite", call, R(time));
+        fmu_fail(m, "%s(%.17g) refused: the time must be finite", call, time);
         return STATUS_ERROR;
     }
     m->s->time = time;

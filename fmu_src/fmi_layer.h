@@ -13,6 +13,11 @@
  * outputs recomputed lazily once their inputs or the state changed, parameters
  * validated when initialisation ends, NaN/inf inputs rejected, the FMU state the
  * whole snapshot (values, internal state, time) and messages worded the same.
+ *
+ * Messages write every number with %.17g, which reads back to the same double (the Python
+ * edition writes the shortest text that does): the two editions' messages have the same words
+ * and the same numbers, not the same bytes.  A message is built only when it is logged: no
+ * function on the per-step path prepares message buffers.
  */
 #ifndef AFC_FMI_LAYER_H
 #define AFC_FMI_LAYER_H
@@ -114,17 +119,8 @@ void fmu_warn(ModelInstance *m, const char *format, ...)
     __attribute__((format(printf, 2, 3)))
 #endif
     ;
-/* x as Python's repr(float) writes it (shortest round trip), into buffer (>= 32 chars) */
-const char *py_repr(double x, char *buffer);
-/* several reprs in one message: declare REPRS; in the function, then R(x) gives the text
- * of x in a buffer of its own (no static or thread-local storage: instances may run in
- * parallel threads, and the Linux binary needs nothing but libc and libm) */
-typedef struct {
-    char text[12][40];
-    int used;
-} Reprs;
-const char *repr_in(Reprs *reprs, double x);
-#define REPRS Reprs reprs_ = {.used = 0}
-#define R(x) repr_in(&reprs_, (x))
+/* x[0], ..., x[n-1] as Python writes a tuple, "(a, b)" or "(a,)", or with brackets "[]" a list,
+ * each number with %.17g; returns buffer */
+const char *numbers_text(char *buffer, size_t size, const double x[], int n, const char *brackets);
 
 #endif

@@ -56,10 +56,9 @@ static void manipulator_derivative(double t, const double x[], double u, const d
 const PlantDerivative plant_derivative = manipulator_derivative;
 
 int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
-    REPRS;
     if (!(V(m, mr1) < V(m, mr0))) {
-        snprintf(message, size, "parameter mr1 = %s is invalid; valid range: 0 <= mr1 < mr0 = %s "
-                 "(the payload mr(t) = mr0 + mr1 sin t must stay > 0)", R(V(m, mr1)), R(V(m, mr0)));
+        snprintf(message, size, "parameter mr1 = %.17g is invalid; valid range: 0 <= mr1 < mr0 = %.17g "
+                 "(the payload mr(t) = mr0 + mr1 sin t must stay > 0)", V(m, mr1), V(m, mr0));
         return MODEL_ERROR;
     }
     return MODEL_OK;

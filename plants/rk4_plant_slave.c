@@ -27,7 +27,6 @@ int model_initialize(ModelInstance *m, double start_time) {
 void model_construct(ModelInstance *m) { model_initialize(m, m->s->start_time); }
 
 int model_step(ModelInstance *m, double current_time, double step_size) {
-    REPRS;
     double params[PLANT_MAX_PARAMS];
     PlantState *state = PLANT(m);
     double x[PLANT_STATES];
@@ -41,11 +40,11 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
         char start[512];
         size_t used = 0;
         for (int s = 0; s < PLANT_STATES && used < sizeof start; s++)
-            used += (size_t)snprintf(start + used, sizeof start - used, "%sx%d=%s", s ? ", " : "", s + 1,
-                                     R(state->x[s]));
-        return fmu_fail(m, "state diverged in doStep(t=%s, h=%s) from %s with u=%s; "
+            used += (size_t)snprintf(start + used, sizeof start - used, "%sx%d=%.17g", s ? ", " : "", s + 1,
+                                     state->x[s]);
+        return fmu_fail(m, "state diverged in doStep(t=%.17g, h=%.17g) from %s with u=%.17g; "
                         "the closed loop is unstable at this step size",
-                        R(current_time), R(step_size), start, R(V(m, u)));
+                        current_time, step_size, start, V(m, u));
     }
     for (int s = 0; s < PLANT_STATES; s++) state->x[s] = x[s];
     return MODEL_OK;

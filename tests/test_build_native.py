@@ -19,6 +19,7 @@ import build_fmu
 import build_native
 from harness import variants
 from tests.fmu_helpers import Driven
+from tests.message_meaning import meaning, parameter_error, written_as_c_does
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = [m.model_identifier for m in build_native.models()]
@@ -284,12 +285,26 @@ def _fail_message(driven: Driven, call) -> str:
 
 
 def _bad_values(variable):
+    """NaN, inf, each bound itself (exclusive) or one beyond it; for a Real, also values whose text
+    needs 16 and 17 significant digits (bound -/+ 1/3, the next double beyond a nonzero bound)."""
     values = [math.nan, math.inf]
-    if variable.minimum is not None:
-        values.append(variable.minimum - 1.0 if not variable.exclusive_minimum else variable.minimum)
-    if variable.maximum is not None:
-        values.append(variable.maximum + 1.0 if not variable.exclusive_maximum else variable.maximum)
+    for bound, exclusive, outward in ((variable.minimum, variable.exclusive_minimum, -1.0),
+                                      (variable.maximum, variable.exclusive_maximum, 1.0)):
+        if bound is None:
+            continue
+        values.append(bound if exclusive else bound + outward)
+        if variable.kind != "Integer":
+            values.append(bound + outward / 3.0)
+            if bound != 0.0:
+                values.append(math.nextafter(bound, outward * math.inf))
     return values
+
+
+def _says_what_python_says(native: str, python: str):
+    """The native message says what the Python one says (words, numbers as doubles), numbers written
+    with %.17g."""
+    assert meaning(native) == meaning(python), (native, python)
+    assert all(written_as_c_does(text) for text in meaning(native).texts), native
 
 
 @pytest.mark.parametrize("model", MODELS)
@@ -313,7 +328,11 @@ def test_invalid_parameters_and_inputs_get_the_python_editions_messages(native, 
                         messages[name] = _fail_message(driven, driven.slave.exitInitializationMode)
                     else:
                         messages[name] = _fail_message(driven, lambda: driven.set(**{variable.name: value}))
-                assert messages["native"] == messages["python"], (variable.name, value)
+                _says_what_python_says(messages["native"], messages["python"])
+                if variable.causality == "parameter":  # the variable, its value and its valid range
+                    name, said, valid = parameter_error(messages["native"])
+                    assert (name, valid) == (variable.name, variable.valid_range()), messages["native"]
+                    assert said == value or math.isnan(said) and math.isnan(value), messages["native"]
                 checked += 1
         output = next(v.name for v in table if v.causality == "output")
         messages = {}
@@ -340,8 +359,53 @@ def test_the_manipulator_payload_rule_has_the_python_message(native, fmu_paths):
             driven.slave.doStep(0.0, 1e-3)
         finally:
             driven.free()
-    assert messages[0] == messages[1]
-    assert "mr1 = 3.0 is invalid" in messages[1]
+    _says_what_python_says(messages[1], messages[0])
+    name, value, valid = parameter_error(messages[1])
+    assert (name, value) == ("mr1", 3.0) and meaning(valid).numbers[:2] == (0.0, 2.0), messages[1]  # 0 <= mr1 < mr0 = 2
+
+
+# model errors: (model, parameters, the input set after the 5th doStep and its value, None when the
+# parameters fail initialisation; what the message begins with)
+MODEL_ERRORS = {
+    "not Hurwitz": ("AdaptiveFuzzyController", dict(order=3, k1=1.0, k2=1.0, k3=2.0), None, "parameters k1..k3"),
+    "rule bound": ("AdaptiveFuzzyController", dict(order=4, sets=4), None, "parameters order = 4, sets = 4"),
+    "outputs overflow": ("AdaptiveFuzzyController", {}, ("e", 1e308), "outputs overflow"),
+    "adaptation diverged": ("AdaptiveFuzzyController", {}, ("de", 1e308), "adaptation diverged"),
+    "adaptation diverged, order 1": ("AdaptiveFuzzyController", dict(order=1), ("e", 1e308), "adaptation diverged"),
+    "pendulum diverged": ("InvertedPendulum", {}, ("u", 1e308), "state diverged"),
+    "manipulator diverged": ("Manipulator", {}, ("u", 1e308), "state diverged"),
+    "motor arm diverged": ("DcMotorArm", {}, ("u", 1e308), "state diverged"),
+}
+CONTROLLER_INPUTS = dict(e=0.2, de=-0.1, ym=0.3, dym=0.5)
+
+
+def _model_error(path, model, parameters, culprit) -> str:
+    driven = Driven(path)
+    try:
+        inputs = CONTROLLER_INPUTS if model == "AdaptiveFuzzyController" else {}
+        if culprit is None:
+            driven.enter(**parameters, **inputs)
+            return _fail_message(driven, driven.slave.exitInitializationMode)
+        driven.initialize(**parameters, **inputs)
+        for n in range(5):
+            driven.slave.doStep(n * 1e-3, 1e-3)
+        name, value = culprit
+        driven.set(**{name: value})
+        return _fail_message(driven, lambda: [driven.slave.doStep(n * 1e-3, 1e-3) for n in range(5, 10)])
+    finally:
+        driven.free()
+
+
+@pytest.mark.parametrize("case", MODEL_ERRORS)
+def test_model_errors_say_what_the_python_editions_say(native, fmu_paths, case):
+    """Invalid parameter combinations, outputs that overflow, adaptation and plant states that diverge: the
+    same words and numbers.  Where Python's math raised, the Python edition adds its text ("(math domain
+    error)"); C's libm returns NaN instead, so that remark is the Python edition's alone."""
+    model, parameters, culprit, beginning = MODEL_ERRORS[case]
+    python = _model_error(fmu_paths[model], model, parameters, culprit)
+    native_message = _model_error(native[model][2], model, parameters, culprit)
+    assert python.startswith(beginning), python
+    _says_what_python_says(native_message, re.sub(r" \(math \w+ error\)", "", python))
 
 
 def _drive_controller(driven: Driven, steps=300, h=1e-3, state_at=None, **parameters):
@@ -388,7 +452,7 @@ def test_the_editions_warn_in_the_same_words(native, fmu_paths, host):
             host(driven)
         finally:
             driven.free()
-        warnings[edition] = [text for status, text in driven.messages if status == 1]
+        warnings[edition] = [meaning(text) for status, text in driven.messages if status == 1]
     assert len(warnings["python"]) == 1, warnings
     assert warnings["native"] == warnings["python"]
 
@@ -458,18 +522,19 @@ def test_native_life_cycle_rules(native):
     """FMI's calling sequence, with the wording of the FMI rules of the shared slave base."""
     driven = Driven(native["InvertedPendulum"][2])
     try:
-        assert _discarded(driven, lambda: driven.slave.doStep(0.0, 1e-3)) == (
+        _says_what_python_says(_discarded(driven, lambda: driven.slave.doStep(0.0, 1e-3)), (
             "fmi2DoStep(currentCommunicationPoint = 0.0, communicationStepSize = 0.001) refused: the FMU is not "
             "initialised: call fmi2ExitInitializationMode first; doStep is allowed only between "
-            "fmi2ExitInitializationMode and fmi2Terminate; state and time unchanged")
+            "fmi2ExitInitializationMode and fmi2Terminate; state and time unchanged"))
         driven.initialize()
-        message = _fail_message(driven, lambda: driven.set(mp=1.0))
-        assert message == ("fmi2SetReal: mp = 1.0 refused at t = 0.0: mp is a parameter of variability fixed, "
-                           "which can be set only before fmi2ExitInitializationMode (it keeps 0.1); in step mode "
-                           "only inputs can be set")
+        _says_what_python_says(_fail_message(driven, lambda: driven.set(mp=1.0)), (
+            "fmi2SetReal: mp = 1.0 refused at t = 0.0: mp is a parameter of variability fixed, which can be set "
+            "only before fmi2ExitInitializationMode (it keeps 0.1); in step mode only inputs can be set"))
         driven.slave.doStep(0.0, 1e-3)
-        assert "expected currentCommunicationPoint = 0.001, the FMU's time" in _discarded(
-            driven, lambda: driven.slave.doStep(0.5, 1e-3))
+        _says_what_python_says(_discarded(driven, lambda: driven.slave.doStep(0.5, 1e-3)), (
+            "fmi2DoStep(currentCommunicationPoint = 0.5, communicationStepSize = 0.001) refused: expected "
+            "currentCommunicationPoint = 0.001, the FMU's time (where the last step ended, or the time of the state "
+            "restored by fmi2SetFMUstate); a step must start there; state and time unchanged"))
         assert "the communication step must be >= 0" in _discarded(driven, lambda: driven.slave.doStep(1e-3, -1.0))
         driven.slave.doStep(1e-3 + 1e-15, 1e-3)  # rounding of the communication point is accepted
         message = _fail_message(driven, lambda: driven.slave.getDirectionalDerivative([9], [8], [1.0]))

@@ -35,6 +35,7 @@ from fmpy import read_model_description
 import build_native
 import c_toolchain
 from harness.scenario import scenario_names
+from tests.message_meaning import meaning
 
 ROOT = Path(__file__).resolve().parents[1]
 HOST_SOURCE = ROOT / "tests" / "c_host" / "host.c"
@@ -266,3 +267,36 @@ def test_the_win64_dlls_under_wine_compute_what_the_linux_binaries_compute(nativ
             f"{run.model} (FMI {version}): win64 under wine differs from linux64 in {differing} values, up to {scaled.max():.3g} "
             f"of the range of {worst} (tolerance {WINDOWS_TOLERANCE:g}); outputs {run.outputs}")
         assert np.ptp(linux, axis=0).max() > 0.0  # the outputs moved
+
+
+# errors a host sees: (model, parameters, inputs per communication point); the controller's outputs
+# overflow at the 6th point (NaN outputs), the pendulum's parameter mc is out of its range
+FAILING_RUNS = {
+    "outputs overflow": ("AdaptiveFuzzyController", {},
+                         dict(e=[0.2] * 5 + [1e308] * 3, de=[-0.1] * 8, ym=[0.3] * 8, dym=[0.5] * 8)),
+    "invalid parameter": ("InvertedPendulum", dict(mc=-1.0), dict(u=[0.0] * 3)),
+}
+
+
+def _host_errors(run: HostRun, host: Path, platform: str, wine=None) -> list[str]:
+    """The FMU's error messages as a C host on the platform logs them (without the instance name)."""
+    program, environment = wine if platform == "win64" else (None, dict(os.environ))
+    command = [*([program] if program else []), str(host), *run.arguments(platform)]
+    returncode, _, errors = run_with_files(command, run.stdin(), environment, run.folder, platform)
+    assert returncode == 3, f"{run.model} ({platform}) exited {returncode}, not with the FMU's error:\n{errors}"
+    return [line.split(": ", 2)[2] for line in errors.splitlines() if line.startswith("[ERROR] c_host: ")]
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("case", FAILING_RUNS)
+def test_the_win64_dlls_under_wine_say_what_the_linux_binaries_say(native, hosts, wine, tmp_path, version, case):
+    """The same words and numbers; Windows' C runtime writes a NaN as -nan(ind) where glibc writes -nan."""
+    model, parameters, inputs = FAILING_RUNS[case]
+    run = HostRun(native[model][version], version, tmp_path / model, 1e-3, parameters,
+                  {name: np.array(values) for name, values in inputs.items()},
+                  [next(v.name for v in read_model_description(str(native[model][version])).modelVariables
+                        if v.causality == "output")])
+    linux = _host_errors(run, hosts["linux64"], "linux64")
+    windows = _host_errors(run, hosts["win64"], "win64", wine)
+    assert len(linux) == 1, linux
+    assert [meaning(text) for text in windows] == [meaning(text) for text in linux], (windows, linux)
