@@ -1,4 +1,4 @@
-"""docs/ci.md's recipes run their commands: the GitHub Actions workflow and the GitLab CI job (issue 24).
+"""docs/ci.md's recipes run their commands: the GitHub Actions workflow and the GitLab CI job.
 
 In a user's repository laid out by docs/ci.md's own block (the example plant of
 tests/data/first_order_lag_fmu.py built by pythonfmu's builder, docs/ci/lag_loop.toml copied; the

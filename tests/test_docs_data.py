@@ -1,4 +1,4 @@
-"""Figures the docs quote from data agree with that data (issue 21: docs that cannot go stale).
+"""Figures the docs quote from data agree with that data: docs that cannot go stale.
 
 Every figure README.md and docs/ take from data is generated from it or checked here:
 
@@ -337,7 +337,7 @@ def test_the_mass_disturbance_sweep_says_what_its_csv_holds():
         ratio, low, high = found.groups()
         assert agrees(low, min(itae)) and agrees(high, max(itae)) and agrees(ratio, max(itae) / min(itae)), \
             f"{controller}: ITAE {min(itae):.4g} -> {max(itae):.4g} ({max(itae) / min(itae):.3g}x)"
-    stop = 20.0  # ts empty when a run never settles (docs/model.md, section 9; CSVs before issue 23: T)
+    stop = 20.0  # ts empty when a run never settles (docs/model.md, section 9; older CSVs: T)
     never = sum(r["ts"] == "" or float(r["ts"]) >= stop - 1e-9 for r in rows if r["controller"] == "fixed")
     assert f"{never} of {len(points)} points never settle" in text
     best = {metric: sum(min(p, key=lambda c: float(p[c][metric])) == "vud" for p in points.values())

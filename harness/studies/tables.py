@@ -149,7 +149,7 @@ def legend_label(controller: str) -> str:
 
 def figures(rows: list, out: Path) -> list:
     """Figs. 4-8 like the paper's: x1 vs ym, x2 vs dym, e, de, ||e||, u of the three controllers."""
-    import matplotlib  # here, not at module level: 1-3 s of import, paid only when figures are drawn
+    import matplotlib  # here, not at module level: its import is paid only when figures are drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
