@@ -45,6 +45,8 @@ def run_command(args) -> int:
                                   "has a communication step (--step)")
     scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
     cli_args.check_output_interval(args.output_interval, scenario.step)
+    if args.out:
+        cli_args.check_writable([args.out])
     progress, close = _progress(scenario.steps, f"{scenario.name}/{args.controller}", enabled=not args.json)
     for note in scenario.notes:  # e.g. the stop moved to a whole number of steps
         print(f"note: {note}", file=sys.stderr)

@@ -13,10 +13,12 @@ from __future__ import annotations
 import argparse
 import difflib
 import math
+import os
 import re
 import shutil
 import subprocess
 import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -257,7 +259,7 @@ def _initialise_once(configured, assignments, fmu_paths, option):
             raise UsageError(f"{option}: {one_line(failure)}") from None
 
 
-# ------------------------------------------------------ committed files
+# ------------------------------------------------------------ outputs
 def tracked_files(paths) -> list:
     """Those of ``paths`` that the project's git repository tracks (none without git or outside it)."""
     root = Path(__file__).resolve().parents[1]
@@ -280,6 +282,28 @@ def refuse_tracked(paths, option: str = "--out"):
     if tracked:
         raise UsageError(f"{option} would overwrite committed files ({', '.join(tracked)}); write into an "
                          "ignored folder (results/, build/) and use --apply to update the committed copies")
+
+
+def check_writable(paths, option: str = "--out"):
+    """Every file a command will write, checked before its first run: its folder exists or is made now
+    (as the command would make it) and takes a new file, and the path is neither a folder nor a file
+    this process may not write.  A mistake costs one line, not the runs before the first write."""
+    paths = [Path(path) for path in paths]
+    for folder in dict.fromkeys(path.parent for path in paths):
+        existing = next(p for p in (folder, *folder.parents) if p.exists())
+        if not existing.is_dir():
+            raise UsageError(f"{option}: {existing} is a file, not a folder")
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryFile(dir=folder):
+                pass
+        except OSError as error:
+            raise UsageError(f"{option}: cannot write into {folder}: {error.strerror or one_line(error)}") from None
+    for path in paths:
+        if path.is_dir():
+            raise UsageError(f"{option}: {path} is a folder; the command writes a file there")
+        if path.exists() and not os.access(path, os.W_OK):
+            raise UsageError(f"{option}: {path} is read-only")
 
 
 # ------------------------------------------------- consistency and warnings

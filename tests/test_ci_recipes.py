@@ -1,7 +1,8 @@
-"""docs/ci.md's recipes run their commands: the GitHub Actions workflow and the GitLab CI job (issue 24).
+"""docs/ci.md's recipes run their commands: the GitHub Actions workflow and the GitLab CI job.
 
-In a user's repository laid out as docs/ci.md says (tests/user_repo.py: a first-order lag plant made
-with plain pythonfmu in the test, docs/ci/lag_loop.toml), the page's first-references block runs, then
+In a user's repository laid out by docs/ci.md's own block (the example plant of
+tests/data/first_order_lag_fmu.py built by pythonfmu's builder, docs/ci/lag_loop.toml copied; the
+afc-fmi checkout a link to this one), the page's first-references block runs, then
 every ``run:`` of docs/ci/github-actions.yml (one shell per step, ``bash -e`` as GitHub runs them, with
 the workflow's ``env``) and every line of the GitLab job's ``script:`` (one shell, stopping at the first
 failing line, with its ``variables``). Two commands cannot run as written here: the checkout or clone
@@ -26,7 +27,6 @@ import yaml
 
 import build_native
 from tests.test_readme_commands import block_commands, readme_blocks
-from tests.user_repo import make_user_repo
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "ci.md"
@@ -61,20 +61,26 @@ def here(command: str) -> str:
     return command
 
 
-def first_references_block() -> list:
-    block = next(b for b in readme_blocks(PAGE.read_text(), "docs/ci.md")
-                 if b.language == "bash" and "--update" in b.text)
+def page_block(marker: str) -> list:
+    """The commands of docs/ci.md's bash block that holds ``marker``."""
+    block = next(b for b in readme_blocks(PAGE.read_text(), "docs/ci.md") if b.language == "bash" and marker in b.text)
     return [command.text for command in block_commands(block)]
 
 
-@pytest.fixture(scope="module")
-def repo(tmp_path_factory, lag_plant_fmu, fmu_paths):
-    """A user's repository after docs/ci.md's first-references block ran in it."""
-    folder = make_user_repo(tmp_path_factory.mktemp("ci_user_repo"), lag_plant_fmu)
-    script = "set -e\n" + "\n".join(first_references_block())
-    completed = subprocess.run(["bash", "-c", script], cwd=folder, env=environment({}), capture_output=True,
-                               text=True, timeout=600)
+def run_script(commands: list, folder: Path):
+    completed = subprocess.run(["bash", "-c", "set -e\n" + "\n".join(commands)], cwd=folder, env=environment({}),
+                               capture_output=True, text=True, timeout=600)
     assert completed.returncode == 0, completed.stdout + completed.stderr
+
+
+@pytest.fixture(scope="module")
+def repo(tmp_path_factory, fmu_paths):
+    """A user's repository made by docs/ci.md's layout block, after its first-references block ran in it."""
+    folder = tmp_path_factory.mktemp("ci_user_repo")
+    link_project(folder)
+    run_script(page_block("pythonfmu build"), folder)
+    assert (folder / "plant" / "FirstOrderLag.fmu").is_file() and (folder / "ci" / "lag_loop.toml").is_file()
+    run_script(page_block("--update"), folder)
     assert (folder / "ci/references/lag_loop_vud_ref.json").is_file()
     assert (folder / "results/junit.xml").is_file() and (folder / "results/regression/report.html").is_file()
     shutil.rmtree(folder / "results")  # what the jobs publish must come from the jobs

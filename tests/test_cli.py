@@ -181,7 +181,11 @@ COMMAND_CASES = [
      2, "not a multiple of the step"),
     ("run: stop shorter than one step", ["run", "pendulum_case1", "--stop", "1e-5"], 2, "shorter than one step"),
     ("run: diverges (a failed run)", ["run", "pendulum_case3", "--step", "0.05", "--stop", "2"], 1, "diverged at t ="),
+    ("run: --out under a file (before the run)", ["run", "pendulum_case1", "--stop", "0.01", "--out", "{text}/r.csv"], 2,
+     "--out: {text} is a file, not a folder"),
     ("tables: --out over committed files", ["tables", "--out", "docs", "--stop", "0.01"], 2, "committed files"),
+    ("tables: --out under a file (before the runs)", ["tables", "--out", "{text}/t", "--stop", "0.01"], 2,
+     "--out: {text} is a file, not a folder"),
     ("sweep: bad TOML content", ["sweep", "{bad_toml}", "--grid", "plant.mp=0.1", "--out", "{folder}/s"], 2,
      "is not valid TOML"),
     ("sweep: unknown instance", ["sweep", "pendulum_case1", "--grid", "plnt.mp=0.1", "--out", "{folder}/s"], 2,
@@ -222,7 +226,7 @@ def test_mistakes_a_command_finds_are_one_line_with_the_right_status(case_id, ar
     assert "Traceback" not in captured.out + captured.err
     line = _one_error_line(captured.err)
     assert code == status, line
-    assert expected in line, line
+    assert expected.format(**files) in line, line
     assert "unknown error" not in line  # pythonfmu's tail of every failure, stripped
 
 

@@ -19,7 +19,7 @@ generator's, tested by its own tests). How the blocks are run (keep to this when
   the command must exit with status N (default 0); each "double-quoted text" in it must appear
   in the command's output (stdout and stderr).
 * A block run as written (no ``sub``, ``append`` or ``omit``) prints no warning the page does not
-  promise: an example whose output warns looks broken to a reader (issue 23). Make the example
+  promise: an example whose output warns looks broken to a reader. Make the example
   clean, or say why in the text and promise the warning (``output:`` or a quoted comment).
 * An HTML comment right before the block's fence adjusts the run, one directive per line::
 

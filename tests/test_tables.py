@@ -1,4 +1,4 @@
-"""End-to-end: `tables` on a shortened horizon (issue 5); the step study: tests/test_step_study.py."""
+"""End-to-end: `tables` on a shortened horizon; the step study: tests/test_step_study.py."""
 import csv
 import re
 
@@ -45,7 +45,7 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys, mo
         assert (tmp_path / f"{name}.png").stat().st_size > 10_000
         assert f"({name}.png)" in report
     assert "claims (decided on the step ladders" in out
-    with open(tmp_path / "table3_beyond_paper.csv") as stream:  # the third-order plant (issue 17)
+    with open(tmp_path / "table3_beyond_paper.csv") as stream:  # the third-order plant
         beyond = list(csv.DictReader(stream))
     assert sorted((r["controller"], r["sets"]) for r in beyond) == sorted(
         (c, m) for c in ("vud", "fixed", "fae") for m in ("2", "3"))
@@ -53,7 +53,7 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys, mo
     assert "## Beyond the paper: a third-order plant" in report and "| vud | 3 (27) |" in report
 
 
-    # issue 23, item 2: one horizon, one answer: es1, es2 undefined on 0.3 s everywhere, ts not settled
+    # one horizon, one answer: es1, es2 undefined on 0.3 s everywhere, ts not settled
     assert "from 0 to 0.3 s at the scenario's communication step. On this horizon es1 and es2 are not defined" \
         in report and "from 0 to 20 s" not in report
     assert "| vud | not settled | n/a | n/a | " in report and "| vud | 3 (27) | not settled | n/a | n/a | " in report
@@ -64,15 +64,27 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys, mo
                             f"error {metric}") == 1
         assert " ± " not in claim and f"no {metric}_pct (vud, fixed, fae: the horizon 0.3 s is shorter" in claim, claim
     assert "es1 and es2 are n/a in every table and their claims are not decided" in captured.err
-    # issue 23, item 4: stderr is not a terminal here (as under `| cat` or in a CI log): progress lines, not silence
-    assert "Table I/II co-simulations and half steps: 1/30 runs done in " in captured.err, captured.err
-    assert re.search(r"Table I/II co-simulations and half steps: 30/30 runs done in \d+ s\n", captured.err)
-    # issue 23, item 5: the report read by a control engineer
+    # stderr is not a terminal here (as under `| cat` or in a CI log): progress lines, not silence
+    assert "Table I/II at h and h/2, third-order plant: 1/30 runs done in " in captured.err, captured.err
+    assert re.search(r"Table I/II at h and h/2, third-order plant: 30/30 runs done in \d+ s\n", captured.err)
+    # the first line counts every run the progress lines count, with the steps of each run's horizon and step
+    first = re.fullmatch(r"30 runs: 30 in one pool in [\d.]+ s \(the 12 cases of Tables I/II at h and h/2, 6 of the "
+                         r"third-order plant\), 0 finer for open claims in [\d.]+ s; (\d+) communication steps, "
+                         r"[\d.]+ s wall on 2 processes; peak memory \d+ MiB \(largest process\)", out.splitlines()[0])
+    assert first, out.splitlines()[0]
+    paper = [row for name in ("table1.csv", "table2.csv") for row in csv.DictReader(open(tmp_path / name))]
+    assert int(first.group(1)) == sum(3 * round(0.3 / float(r["step"])) for r in paper) + \
+        sum(round(0.3 / float(r["step"])) for r in beyond)  # h and h/2 of each paper case, the third-order runs
+    # the report read by a control engineer
     for definition in ("- `vud` (variant 1): proposed AFC (variable universes)",
                        "- `fixed` (variant 2): stand-in for [46] (fixed universes)",
                        "- `fae` (variant 3): stand-in for [28] (fixed universes + error estimator)",
-                       "- ITAE [rad.s2]: ", "- Ec [N2.s on the pendulum, (N.m)2.s on the manipulator]: ",
-                       "- TV(u)/s [N/s on the pendulum, N.m/s on the manipulator]: "):
+                       "- ITAE [rad.s2]: ",
+                       "- Ec [N2.s in pendulum_case1, pendulum_case2, pendulum_case3; (N.m)2.s in manipulator; "
+                       "V2.s in motor_arm]: ",
+                       "- umax [N in pendulum_case1, pendulum_case2, pendulum_case3; N.m in manipulator; V in motor_arm]: ",
+                       "- TV(u)/s [N/s in pendulum_case1, pendulum_case2, pendulum_case3; N.m/s in manipulator; "
+                       "V/s in motor_arm]: "):
         assert definition in report, definition
     assert report.count("| controller | ts (s) | es1 (%) | es2 (%) | ITAE (rad.s2) | IAE (rad.s) | Ec (N2.s) | "
                         "umax (N) | TV(u)/s (N/s) |") == 3
@@ -88,7 +100,7 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys, mo
 
 
 def test_figures_define_the_controllers_and_draw_the_settling_band(fmu_paths):
-    """Issue 23, item 5: the legends say what vud, fixed, fae are; e carries the 5 % band of ts."""
+    """The legends say what vud, fixed, fae are; e carries the 5 % band of ts."""
     time = np.linspace(0.0, 1.0, 11)
     signals = {"time": time, **{name: np.sin(time) for name in ("plant.y", "plant.dy", "reference.de", "controller.u",
                                                                  "reference.dym")},
@@ -115,7 +127,11 @@ def test_tables_in_model_exchange_decide_the_claims_on_tolerance_ladders(tmp_pat
         pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
     code = cli_main(["tables", "--edition", "native", "--algorithm", "me", "--rtol", "1e-8", "--out", str(tmp_path),
                      "--stop", "0.3", "--jobs", "2", "--refine", "0"])
-    assert code == 0, capsys.readouterr().err
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    first = captured.out.splitlines()[0]
+    assert first.startswith("30 runs: 30 in one pool in ") and "(the 12 cases of Tables I/II at rtol and 10 rtol, 6 of " \
+        "the third-order plant), 0 finer for open claims" in first and "communication steps" not in first, first
     with open(tmp_path / "table2.csv") as stream:
         rows = list(csv.DictReader(stream))
     assert all(r["status"] == "ok" and r["validated_step"] == "" for r in rows)

@@ -259,6 +259,34 @@ def test_a_study_writes_a_scenario_that_run_and_regress_take_and_run_reproduces_
     assert (tmp_path / f"{summary['study']}_progress.png").stat().st_size > 1000
 
 
+def test_the_report_says_plainly_when_no_trial_beat_the_start(tmp_path, paths, edition):
+    """One trial, the starting parameters: the best is the start, and no trial beat it."""
+    summary = tune(config(tmp_path, paths, edition, trials=1))
+    assert summary["best"]["number"] == summary["start"]["number"] == 0 and summary["first_better"] is None
+    report = (tmp_path / "report.md").read_text()
+    assert "(trial #0); no trial beat the starting parameters." in report and "#None" not in report
+
+
+@pytest.mark.parametrize("case", ["report.md is a folder", "--out under a file", "--compare, comparison.json a folder"])
+def test_an_output_it_cannot_write_is_one_line_exit_2_before_any_trial(tmp_path, edition, capsys, case):
+    """Every output is checked before the database opens (no trial runs); --storage elsewhere too."""
+    out, database, extra = tmp_path / "out", tmp_path / "out" / "pendulum_case1.db", []
+    if case == "--out under a file":
+        (tmp_path / "a_file").write_text("")
+        out, culprit = tmp_path / "a_file" / "tune", tmp_path / "a_file"
+        database = tmp_path / "elsewhere.db"
+        extra = ["--storage", f"sqlite:///{database}"]
+    else:
+        culprit = out / ("comparison.json" if "--compare" in case else "report.md")
+        culprit.mkdir(parents=True)
+        extra = ["--compare"] if "--compare" in case else []
+    status = cli_main(["tune", "pendulum_case1", "--trials", "2", "--jobs", "1", "--stop", "0.05", "--edition", edition,
+                       "--out", str(out), "--quiet", "--held-out", *extra])
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and len(err.splitlines()) == 1 and f"--out: {culprit} is a f" in err, err
+    assert not database.exists()  # the database opens before the first trial
+
+
 def test_diverging_and_chattering_candidates_are_pruned_with_the_reason(tmp_path, paths, edition):
     scenario = scenarios.configure("pendulum_case1", "vud", stop=0.3)
     task = {"scenario": scenario, "values": {}, "grid": [()], "fmu_paths": paths, "objective": "ITAE",

@@ -149,7 +149,7 @@ def legend_label(controller: str) -> str:
 
 def figures(rows: list, out: Path) -> list:
     """Figs. 4-8 like the paper's: x1 vs ym, x2 vs dym, e, de, ||e||, u of the three controllers."""
-    import matplotlib  # here, not at module level: 1-3 s of import, paid only when figures are drawn
+    import matplotlib  # here, not at module level: its import is paid only when figures are drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -264,18 +264,28 @@ def horizon_text(rows: list, model_exchange: bool = False) -> str:
     return text
 
 
-def reading_guide(rows: list) -> list:
-    """What the report's names mean: the controllers, the scores with their units, n/a, not settled."""
+def units_text(units: dict) -> str:
+    """One score's unit over the scenarios {name: unit}: the unit alone when they share it, else each unit
+    with its scenarios (``N2.s in pendulum_case1, pendulum_case2; V2.s in motor_arm``)."""
+    by_unit = {}
+    for name, unit in units.items():
+        by_unit.setdefault(unit, []).append(name)
+    if len(by_unit) == 1:
+        return next(iter(by_unit))
+    return "; ".join(f"{unit} in {', '.join(names)}" for unit, names in by_unit.items())
+
+
+def reading_guide(names) -> list:
+    """What the report's names mean: the controllers, the scores with their units in each of the scenarios
+    ``names`` (from the units their FMUs declare), n/a, not settled."""
     lines = ["## How to read this report", "", "The controllers (the `variant` parameter of the controller FMU; "
              "docs/model.md section 6):", ""]
     lines += [f"- `{v.name}` (variant {v.code}): {v.label}" for v in variants.VARIANTS if v.name in CONTROLLERS]
-    units = {name: score_units(scenarios.load(name)) for name in ALL_SCENARIOS}
+    units = {name: score_units(scenarios.load(name)) for name in names}
     lines += ["", "The scores (docs/model.md section 9) [unit]:", ""]
     for metric in SHOWN_METRICS:
-        unit = units["pendulum_case1"][metric]
-        other = units["manipulator"][metric]
-        unit_text = unit if unit == other else f"{unit} on the pendulum, {other} on the manipulator"
-        lines.append(f"- {HEADINGS[metric]} [{unit_text}]: {DEFINITIONS[metric]}")
+        unit = units_text({name: units[name][metric] for name in names})
+        lines.append(f"- {HEADINGS[metric]} [{unit}]: {DEFINITIONS[metric]}")
     lines += ["", "*n/a*: the score is not defined on the run's horizon; *not settled*: |e| did not stay inside the "
               f"{100 * SETTLING_BAND:g} % band up to the stop time (ts is then no number, not the stop time).", ""]
     return lines
@@ -303,7 +313,7 @@ def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: l
              f"on {jobs} processes "
              f"(peak memory of the largest process {peak_mib:.0f} MiB). "
              f"Each row is {how} {horizon_text(rows, model_exchange=rtol is not None)}", ""]
-    parts += reading_guide(rows)
+    parts += reading_guide(list(dict.fromkeys(row["scenario"] for row in [*rows, *beyond_rows])))
     parts += ["## Table I: inverted pendulum", ""]
     for name in PENDULUM:
         parts += [f"### {name}: {scenarios.load(name).description}", "", *table_block(rows, name)]
@@ -382,6 +392,25 @@ def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int
     return claims, refined
 
 
+def ladder_words(model_exchange: bool) -> str:
+    """How the claims' ladders begin: each case at h and h/2, or (Model Exchange) at rtol and a looser one."""
+    return (f"at rtol and {claims_module.TOLERANCE_FACTOR:g} rtol" if model_exchange else "at h and h/2")
+
+
+def communication_steps(outcomes) -> int:
+    """The communication steps of co-simulation runs, from each outcome's horizon and step."""
+    return sum(round((o["stop"] - o["start"]) / o["step"]) for o in outcomes)
+
+
+def run_summary(paper_cases: int, pooled: int, beyond: int, refined: int, pool_s: float, wall_s: float, jobs: int,
+                peak_mib: float, steps: int | None, model_exchange: bool) -> str:
+    """The command's first line: every run it made, by kind, with its wall time (README.md quotes the counts)."""
+    return (f"{pooled + refined} runs: {pooled} in one pool in {pool_s:.1f} s (the {paper_cases} cases of Tables I/II "
+            f"{ladder_words(model_exchange)}, {beyond} of the third-order plant), {refined} finer for open claims in "
+            f"{wall_s - pool_s:.1f} s; " + (f"{steps} communication steps, " if steps is not None else "")
+            + f"{wall_s:.1f} s wall on {jobs} processes; peak memory {peak_mib:.0f} MiB (largest process)")
+
+
 #: the figure the README shows; ``tables --apply`` copies it from the report into docs/
 README_FIGURE = "pendulum_case2.png"
 DOCS_DIR = ROOT / "docs"
@@ -389,9 +418,10 @@ DOCS_DIR = ROOT / "docs"
 
 def tables_command(args) -> int:
     out = Path(args.out)
-    cli_args.refuse_tracked([out / name for name in ("table1.csv", "table2.csv", "table3_beyond_paper.csv", "report.md",
-                                                     *(f"{n}.png" for n in ALL_SCENARIOS))])
-    out.mkdir(parents=True, exist_ok=True)
+    outputs = [out / name for name in ("table1.csv", "table2.csv", "table3_beyond_paper.csv", "report.md",
+                                       *(f"{n}.png" for n in ALL_SCENARIOS))]
+    cli_args.refuse_tracked(outputs)
+    cli_args.check_writable(outputs)  # before the first run; it makes the folder
     jobs = args.jobs or default_jobs()
     me = args.algorithm == MODEL_EXCHANGE
     if not me and args.rtol is not None:
@@ -406,7 +436,7 @@ def tables_command(args) -> int:
     started = clock.perf_counter()
     everything = sorted([*runs, *extra], key=case_cost, reverse=True)
     outcomes = dict(zip(everything, run_cases(everything, jobs=jobs,
-                                              description="Table I/II co-simulations and half steps")))
+                                              description=f"Table I/II {ladder_words(me)}, third-order plant")))
     rows = [outcomes[case] for case in cases]
     beyond_rows = [dict(outcomes[case], sets=dict(case.overrides)["controller.sets"]) for case in extra]
     ladders = claims_module.ladders_from_rows([outcomes[case] for case in runs])
@@ -433,9 +463,9 @@ def tables_command(args) -> int:
     figure_paths = figures(rows, out)
     (out / "report.md").write_text(report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib,
                                                    beyond_rows, rtol))
-    print(f"{len(rows)} co-simulations and the same at half the step in {ladder_s:.1f} s, {len(refined)} finer "
-          f"for open claims in {wall_s - ladder_s:.1f} s: {wall_s:.1f} s wall on {jobs} processes; peak memory "
-          f"{peak_mib:.0f} MiB (largest process)")
+    print(run_summary(len(cases), len(everything), len(extra), len(refined), ladder_s, wall_s, jobs, peak_mib,
+                      None if me else communication_steps([*(o for ladder in ladders.values() for o in ladder),
+                                                            *(outcomes[case] for case in extra)]), me))
     for name in ALL_SCENARIOS:
         print(f"\n{name}\n{paper_table(rows, name)}")
     print(f"\n{BEYOND_PAPER} (beyond the paper)\n{beyond_paper_table(beyond_rows)}")

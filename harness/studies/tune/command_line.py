@@ -27,7 +27,7 @@ from .objective import ROBUST_GRIDS, Constraint, parse_constraint, parse_vary, s
 from .report import comparison_markdown, number_text, write_report
 from .space import parse_range
 from .storage import check_existing
-from .study import tune
+from .study import study_outputs, tune
 
 NEEDS = (("optuna", "Optuna"), ("tomlkit", "tomlkit"))  # (module, name) of what the tune extra brings
 TUNE_EXTRA = "optuna, optuna-dashboard, cmaes, tomlkit"  # pyproject.toml's tune extra
@@ -89,8 +89,12 @@ def compare_command(args, out: Path, log) -> int:
                 if seed != seeds[0]:  # the first repetition is the study a plain `tune` makes
                     config.study = f"{prepare(copy.copy(config)).study_name}-seed{seed}"
                 plan.append((scenario_name, seed, config))
+    outputs = [out / "comparison.json"]
     for _, _, config in plan:  # every usage error (and a study of the same name made otherwise) before any trial
-        check_existing(prepare(copy.copy(config)))
+        prepared = prepare(copy.copy(config))
+        check_existing(prepared)
+        outputs += study_outputs(prepared)
+    cli_args.check_writable(outputs)
     summaries = [(scenario_name, seed, tune(config, log)) for scenario_name, seed, config in plan]
     comparison = {"trials": args.trials, "seeds": seeds, "sampler": args.sampler, "objective": objective,
                   "constraints": [c.text for c in prepare(copy.copy(plan[0][2])).constraints], "scenarios": {}}

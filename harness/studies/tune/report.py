@@ -11,11 +11,20 @@ from ... import cli_args, variants
 from ...scores import SCORE_KEYS
 from .summary import pareto_front
 
+REPORT_NAME = "report.md"  # the folder's report, every study of the folder in it
+
 
 def number_text(value, digits: int = 6) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "n/a"
     return f"{value:.{digits}g}"
+
+
+def first_better_text(first_better) -> str:
+    """Which trial first beat the starting parameters, or that none did."""
+    if first_better is None:
+        return "no trial beat the starting parameters"
+    return f"first better than the start at trial #{first_better}"
 
 
 def study_markdown(summary: dict, folder: Path) -> str:
@@ -50,8 +59,7 @@ def study_markdown(summary: dict, folder: Path) -> str:
         improvement = ""
         if start is not None:
             improvement = (f" against {number_text(start['value'])} for the starting parameters "
-                           f"(trial #{start['number']}); first better than the start at trial "
-                           f"#{summary['first_better']}")
+                           f"(trial #{start['number']}); {first_better_text(summary['first_better'])}")
         half = best["half_step"]
         lines.append(f"Trial #{best['number']}: {objective} = {number_text(best['value'])}{improvement}. "
                      f"Re-run at half the step ({half['step']:g} s): {objective} "
@@ -229,6 +237,6 @@ def write_report(out: Path) -> Path:
             parts.append(f"(comparison.json not shown: {cli_args.one_line(error)}; run `tune --compare` again)\n")
     for summary in summaries:
         parts.append(study_markdown(summary, out))
-    path = out / "report.md"
+    path = out / REPORT_NAME
     path.write_text("\n".join(parts))
     return path

@@ -5,10 +5,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from ... import cli_args
 from ...fmi import release_extractions
 from .config import Prepared, TuneConfig, prepare
 from .loop import run_study
-from .report import figure_pareto, figure_progress, write_report
+from .report import REPORT_NAME, figure_pareto, figure_progress, write_report
 from .scenario_file import file_stem, write_tuned_toml
 from .storage import best_trial, open_storage, open_study, outcome_of
 from .summary import held_out_runs, summarize
@@ -17,6 +18,8 @@ from .summary import held_out_runs, summarize
 def tune(config: TuneConfig, log=None, outputs: bool = True) -> dict:
     """Prepare, open the study, run it, write the outputs; returns the study's summary (plain data)."""
     prepared = prepare(config)
+    if outputs:  # before the database and the first trial: a folder it cannot write is one line, not lost trials
+        cli_args.check_writable(study_outputs(prepared))
     out = Path(config.out)
     if config.storage is None:
         out.mkdir(parents=True, exist_ok=True)
@@ -39,21 +42,28 @@ def tune(config: TuneConfig, log=None, outputs: bool = True) -> dict:
     return summary
 
 
+def study_outputs(prepared: Prepared) -> list:
+    """The files one study writes into its output folder: <study>.toml, .json, the two figures, report.md."""
+    out = Path(prepared.config.out)
+    base = file_stem(prepared.study_name)
+    return [out / f"{base}.toml", out / f"{base}.json", out / f"{base}_progress.png", out / f"{base}_pareto.png",
+            out / REPORT_NAME]
+
+
 def write_study_outputs(prepared: Prepared, study, run_info: dict | None, held_out: bool = True,
                         jobs: int = 1) -> dict:
     """<study>.toml (when there is a best), <study>.json, the two figures; returns the summary."""
-    out = Path(prepared.config.out)
-    out.mkdir(parents=True, exist_ok=True)
-    base = file_stem(prepared.study_name)
+    toml, data, progress, pareto, _ = study_outputs(prepared)
+    toml.parent.mkdir(parents=True, exist_ok=True)
     summary = summarize(prepared, study, run_info)
     summary["study_file"] = None
     best = best_trial(study.get_trials(deepcopy=False))
     if best is not None:
-        path = write_tuned_toml(prepared, best, out / f"{base}.toml")
+        path = write_tuned_toml(prepared, best, toml)
         summary["study_file"] = str(path)
         if held_out and prepared.held_out:
             summary["held_out"] = held_out_runs(prepared, outcome_of(best)["parameters"], jobs)
-    figure_progress(summary, out / f"{base}_progress.png")
-    figure_pareto(summary, out / f"{base}_pareto.png")
-    (out / f"{base}.json").write_text(json.dumps(summary, indent=1, default=str))
+    figure_progress(summary, progress)
+    figure_pareto(summary, pareto)
+    data.write_text(json.dumps(summary, indent=1, default=str))
     return summary
