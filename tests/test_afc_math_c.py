@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import build_native
+from native_build import compiler
 from fmu_src import afc_math
 from harness import variants
 
@@ -71,7 +72,7 @@ SIGNATURES = {  # name: (restype, argtypes)
 
 @pytest.fixture(scope="module")
 def afc():
-    library = ctypes.CDLL(str(build_native.math_library()))
+    library = ctypes.CDLL(str(compiler.math_library()))
     for name, (restype, argtypes) in SIGNATURES.items():
         function = getattr(library, name)
         function.restype, function.argtypes = restype, argtypes

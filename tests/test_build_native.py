@@ -17,6 +17,9 @@ from fmpy.fmi1 import FMICallException
 
 import build_fmu
 import build_native
+import native_build
+from native_build import compiler, description, header
+from native_build import model_exchange as native_model_exchange
 from harness import variants
 from tests.fmu_helpers import Driven
 from tests.message_meaning import meaning, parameter_error, written_as_c_does
@@ -49,7 +52,7 @@ def platforms(native):
 
 def api_functions(version: int) -> set[str]:
     """Every function of the FMI API, from the function types of fmpy's headers."""
-    text = (build_native.fmi_headers() / f"fmi{version}FunctionTypes.h").read_text()
+    text = (compiler.fmi_headers() / f"fmi{version}FunctionTypes.h").read_text()
     return set(re.findall(rf"\b(fmi{version}\w+)TYPE\b", text))
 
 
@@ -200,7 +203,7 @@ def test_native_binaries_carry_no_build_path(native, model):
             for name in archive.namelist():
                 if name.startswith("binaries/"):
                     data = archive.read(name)
-                    for path in (str(build_native.ROOT), "build/native/obj", "/tmp/"):
+                    for path in (str(native_build.ROOT), "build/native/obj", "/tmp/"):
                         assert path.encode() not in data, (name, path)
 
 
@@ -217,7 +220,7 @@ def test_the_editions_declare_the_same_variables(native, fmu_paths, model):
     python = _variables(fmu_paths[model])
     # beyond the table, the native edition declares its Model Exchange variables: der(x), event
     # indicators and locals (tests/test_model_exchange.py checks them)
-    extras = build_native.model_exchange(model).extra_names()
+    extras = native_model_exchange.model_exchange(model).extra_names()
     for version in (2, 3):
         described = _variables(native[model][version])
         for part in (python, described):
@@ -239,10 +242,10 @@ def test_the_native_descriptions_follow_the_declaration_table(native, monkeypatc
     original = cls.VARIABLES
     changed = tuple(v if v.name != "omega" else type(v)(**{**v.__dict__, "start": 2.5}) for v in original)
     monkeypatch.setattr(cls, "VARIABLES", changed)
-    root = build_native.fmi2_description("TrackingReference", "{guid}")
+    root = description.fmi2_description("TrackingReference", "{guid}")
     omega = next(e for e in root.find("ModelVariables") if e.get("name") == "omega")
     assert float(omega[0].get("start")) == 2.5
-    assert "2.5" in build_native.variables_header("TrackingReference", "{guid}")
+    assert "2.5" in header.variables_header("TrackingReference", "{guid}")
 
 
 # -------------------------------------------------------------- compliance

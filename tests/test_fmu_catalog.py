@@ -5,6 +5,8 @@ import pytest
 
 import build_fmu
 import build_native
+from native_build import description
+from native_build import model_exchange as native_model_exchange
 import fmu_catalog
 from plants import registry
 
@@ -42,20 +44,20 @@ def test_an_unknown_identifier_names_the_valid_ones():
 
 
 def test_every_plant_row_declares_its_model_exchange_interface(monkeypatch, capsys):
-    """The native build's Model Exchange table (build_native.MODEL_EXCHANGE) has an entry per registry row;
+    """The native build's Model Exchange table (native_build/model_exchange.py: MODEL_EXCHANGE) has an entry per registry row;
     a row without one stops the build with one line naming the table, not a KeyError."""
     for row in registry.PLANT_FMUS:
-        me = build_native.model_exchange(row.model_identifier)
+        me = native_model_exchange.model_exchange(row.model_identifier)
         assert len(me.states) == (row.order or 0), row.model_identifier  # y, dy, ... of an RK4 plant; none else
-    monkeypatch.delitem(build_native.MODEL_EXCHANGE, "Manipulator")
+    monkeypatch.delitem(native_model_exchange.MODEL_EXCHANGE, "Manipulator")
     with pytest.raises(build_native.NativeBuildError, match="MODEL_EXCHANGE has no entry for 'Manipulator'"):
-        build_native.model_guid("Manipulator")  # where a build of the native FMU first asks for it
+        description.model_guid("Manipulator")  # where a build of the native FMU first asks for it
     # the build command says so in one line (the build itself is not run: its first step, the GUID, fails)
     monkeypatch.setattr(build_native, "compiler_available", lambda: True)
-    monkeypatch.setattr(build_fmu, "ensure_built", lambda **_: build_native.model_guid("Manipulator"))
+    monkeypatch.setattr(build_fmu, "ensure_built", lambda **_: description.model_guid("Manipulator"))
     assert build_fmu.main(["--edition", "native"]) == 1
     error = capsys.readouterr().err
-    assert error.startswith("error: build_native.py: MODEL_EXCHANGE has no entry for 'Manipulator'")
+    assert error.startswith("error: native_build/model_exchange.py: MODEL_EXCHANGE has no entry for 'Manipulator'")
     assert "Traceback" not in error and len(error.strip().splitlines()) == 1
 
 

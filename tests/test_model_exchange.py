@@ -26,6 +26,7 @@ from fmpy.fmi1 import FMICallException
 
 import build_fmu
 import build_native
+from native_build import model_exchange as native_model_exchange
 from fmu_src import afc_math
 from plants import dc_motor_arm_model, inverted_pendulum_model, manipulator_model
 from tests import me_helpers as me
@@ -631,7 +632,7 @@ def _expected_initial(model: str, name: str) -> list:
     rows = {v.name: v for v in table(model).VARIABLES}
     if name in rows:
         return sorted(initial_dependencies(table(model).VARIABLES, rows[name]))
-    declaration = build_native.model_exchange(model)
+    declaration = native_model_exchange.model_exchange(model)
     derivative = next(d for d in declaration.derivatives if f"der({d.state})" == name)
     knowns = set(derivative.parameters)
     for known, _ in derivative.depends_on:
@@ -648,7 +649,7 @@ def test_the_model_structure_declares_the_table_s_dependencies(native, fmu_paths
     path = fmu_paths[model] if edition == "python" else native[model][int(edition[-1])]
     md = read_model_description(str(path))
     rows = {v.name: v for v in table(model).VARIABLES}
-    declaration = build_native.model_exchange(model)
+    declaration = native_model_exchange.model_exchange(model)
     output_states = dict(declaration.output_states)
     # Outputs: the inputs of the table's depends_on; in the native edition also the states
     assert sorted(u.variable.name for u in md.outputs) == sorted(n for n, v in rows.items() if v.causality == "output")
@@ -728,7 +729,7 @@ def test_every_numerical_dependency_is_declared_in_continuous_time(native, model
     try:
         fmu.initialize(**parameters, **inputs(0.3))
         fmu.set_time(0.3)
-        fmu.md_states = [d.state for d in build_native.model_exchange(model).derivatives]
+        fmu.md_states = [d.state for d in native_model_exchange.model_exchange(model).derivatives]
         declared = {u.variable.name: set(_names(u))
                     for u in (*fmu.md.outputs, *fmu.md.derivatives, *fmu.md.eventIndicators)}  # (FMI 3.0's)
         x = fmu.states() + np.linspace(0.1, 0.3, fmu.nx)  # away from the start values (thetas unequal)
