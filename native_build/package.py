@@ -62,7 +62,7 @@ def fmu_files(model: fmu_catalog.FmuSource, descriptions: dict[int, bytes], head
     """{FMI version: {archive path: bytes}}: the description, the sources (the layer, the model's C
     files, its generated header) and each target's binary (``binaries[(version, target)]``)."""
     name = model.model_identifier
-    sources = {f"sources/{p.name}": p.read_bytes() for p in (*LAYER, *model.c_sources, *model.c_headers, header)}
+    sources = {f"sources/{fmu_catalog.archive_name(p)}": p.read_bytes() for p in (*LAYER, *model.c_sources, *model.c_headers, header)}
     files = {version: {"modelDescription.xml": descriptions[version], **sources} for version in (2, 3)}
     darwin = [binaries[(2, t)].read_bytes() for t in targets if t.platform == "darwin64"]
     for target in targets:

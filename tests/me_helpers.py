@@ -18,7 +18,9 @@ from fmpy.fmi2 import FMU2Model, defaultCallbacks, fmi2CallbackFunctions, fmi2Ca
 from fmpy.fmi3 import FMU3Model
 
 from fmu_src import afc_math
-from plants import dc_motor_arm_model, inverted_pendulum_model, manipulator_model
+from plants.dc_motor_arm import model as dc_motor_arm_model
+from plants.inverted_pendulum import model as inverted_pendulum_model
+from plants.manipulator import model as manipulator_model
 
 
 def _pointer(array: np.ndarray):
