@@ -2,7 +2,7 @@
 
 ``MeInstance`` wraps fmpy's FMU2Model / FMU3Model (FMI 2.0 / 3.0) with name-based access,
 captured log messages and numpy arrays for states, derivatives and event indicators.  The
-``*_reference`` functions integrate the pure Python model functions (plants/*_model.py,
+``*_reference`` functions integrate the pure Python model functions (plants/*/model.py,
 fmu_src/afc_math.py) with scipy's solve_ivp, through the same piecewise-constant inputs and,
 for the manipulator, through the same friction modes and events (docs/model_exchange.md).
 """

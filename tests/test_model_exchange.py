@@ -1,6 +1,6 @@
 """The native FMUs' Model Exchange interface, FMI 2.0 and 3.0 (docs/model_exchange.md).
 
-* the derivatives are the pure Python model functions' (plants/*_model.py, fmu_src/afc_math.py),
+* the derivatives are the pure Python model functions' (plants/*/model.py, fmu_src/afc_math.py),
   bit for bit, in every friction mode of the manipulator and every controller variant;
 * ``fmpy simulate --interface-type ModelExchange`` runs each FMU alone (inputs from a CSV of
   piecewise-constant signals) and agrees with solve_ivp of the Python model, the manipulator's
