@@ -94,7 +94,10 @@ def test_each_fmu_file_loads_under_one_module_name():
     staged = {fmu_staging.staged_module(p) for row in fmu_catalog.FMUS for p in row.sources}
     for row in fmu_catalog.FMUS:
         fmu_catalog.model_class(row.model_identifier)
-    assert not staged & set(sys.modules), sorted(staged & set(sys.modules))
+    # an FMU loaded in this process has its own copies under these names, from its resources folder
+    twice = [name for name in staged & set(sys.modules)
+             if Path(getattr(sys.modules[name], "__file__", "") or "").resolve().is_relative_to(ROOT)]
+    assert not twice, twice
     assert not {str(ROOT / "fmu_src"), str(ROOT / "plants")} & set(sys.path)
 
 
