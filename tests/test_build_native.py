@@ -61,7 +61,9 @@ def binary_kind(data: bytes) -> str:
     """elf-x86_64, elf-aarch64, pe-x86_64, macho-x86_64, macho-arm64 or fat:<kinds> from the magic bytes."""
     if data[:4] == ELF_MAGIC:
         machine = struct.unpack("<H", data[18:20])[0]
-        return {62: "elf-x86_64", 183: "elf-aarch64"}.get(machine, f"elf-{machine}") if data[4] == 2 else f"elf32-{machine}"
+        if data[4] != 2:
+            return f"elf32-{machine}"
+        return {62: "elf-x86_64", 183: "elf-aarch64"}.get(machine, f"elf-{machine}")
     if data[:2] == b"MZ":
         offset = struct.unpack("<I", data[0x3C:0x40])[0]
         assert data[offset:offset + 4] == b"PE\0\0"
