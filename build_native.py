@@ -1,7 +1,7 @@
 """Build the native edition of the FMUs: the same four models in C, FMI 2.0 and FMI 3.0.
 
     python build_fmu.py --edition native            # via the project's build script
-    python build_native.py [--targets linux64,win64,darwin64] [--force]
+    python build_native.py [--targets linux64,win64,darwin64,aarch64-linux] [--force]
 
 From each FMU's declaration table (the ``VARIABLES`` of its pythonfmu class) the
 stages of :mod:`native_build` (one module each) generate
@@ -21,14 +21,15 @@ stages of :mod:`native_build` (one module each) generate
 then compiles ``fmu_src/fmi_layer.c`` with the model's C files with zig's C compiler
 (``pip install ziglang``, the ``native`` extra) for
 
-=========  ===================================  ==========================  ==========================
-platform   zig target                           FMI 2.0 folder              FMI 3.0 folder
-=========  ===================================  ==========================  ==========================
-linux64    x86_64-linux-gnu.2.17 (glibc 2.17)   binaries/linux64            binaries/x86_64-linux
-win64      x86_64-windows-gnu (UCRT)            binaries/win64              binaries/x86_64-windows
-darwin64   x86_64-macos.10.13, aarch64-macos.11 binaries/darwin64 (fat:     binaries/x86_64-darwin,
-                                                both architectures)         binaries/aarch64-darwin
-=========  ===================================  ==========================  ==========================
+=============  ===================================  ==========================  ==========================
+platform       zig target                           FMI 2.0 folder              FMI 3.0 folder
+=============  ===================================  ==========================  ==========================
+linux64        x86_64-linux-gnu.2.17 (glibc 2.17)   binaries/linux64            binaries/x86_64-linux
+win64          x86_64-windows-gnu (UCRT)            binaries/win64              binaries/x86_64-windows
+darwin64       x86_64-macos.10.13, aarch64-macos.11 binaries/darwin64 (fat:     binaries/x86_64-darwin,
+                                                    both architectures)         binaries/aarch64-darwin
+aarch64-linux  aarch64-linux-gnu.2.17 (glibc 2.17)  binaries/aarch64-linux      binaries/aarch64-linux
+=============  ===================================  ==========================  ==========================
 
 Compiled binaries are cached under build/native/obj by a hash of their inputs (sources,
 generated header, flags, compiler version), so a rebuild compiles only what changed;
@@ -113,7 +114,7 @@ def _stamp(model: FmuSource, platforms) -> str:
 def ensure_built(platforms=None, force: bool = False, verbose: bool = False, jobs: int = 2) -> dict[str, dict[int, Path]]:
     """Build the native FMUs whose inputs changed; return {model identifier: {2: path, 3: path}}.
 
-    ``platforms`` defaults to $AFC_NATIVE_PLATFORMS (comma-separated) or all three.
+    ``platforms`` defaults to $AFC_NATIVE_PLATFORMS (comma-separated) or all of PLATFORMS.
     """
     if not compiler_available():
         raise NativeBuildError("the native edition needs zig's C compiler: pip install ziglang "

@@ -277,7 +277,7 @@ def readme(entry: Entry, reference_rows: int) -> str:
     edition = ("the reference edition, built with pythonfmu 0.7: the host needs Python 3 with the packages "
                "of afc-fmi's pyproject.toml (a host that is not Python preloads libpython)"
                if entry.edition == "python" else
-               "the native C edition: no Python needed (binaries for linux64, win64, darwin64)")
+               "the native C edition: no Python needed (binaries for linux64, win64, darwin64, aarch64-linux)")
     replay_text = ("at t_k the inputs of row k of the _in.csv, doStep from t_k to t_k+1, the outputs read at t_k+1 "
                    "(as fmpy and the FMU Compliance Checker replay an input file)")
     lines = [f"# {e.model}: {description}", "",
