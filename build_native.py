@@ -54,6 +54,7 @@ from native_build.compiler import compile_binary
 from native_build.description import fmi2_description, fmi3_description, model_guid, pretty_xml
 from native_build.header import variables_header
 from native_build.package import atomic_write, fmu_files, zip_archive
+from native_build.sources import add_source_files, source_files
 from native_build.targets import PLATFORMS, selected_targets
 from plants import registry as plant_registry
 
@@ -81,6 +82,7 @@ def build_model(model: FmuSource, platforms=PLATFORMS, jobs: int = 2, zig_versio
     guid = model_guid(model.model_identifier)
     description2 = fmi2_description(model.model_identifier, guid)
     description3 = fmi3_description(description2)
+    add_source_files(description2, model)  # after the translation: FMI 3.0 has buildDescription.xml instead
     header_dir = WORK_DIR / "generated" / model.model_identifier
     header = header_dir / "model_variables.h"
     text = variables_header(model.model_identifier, guid)
@@ -91,7 +93,8 @@ def build_model(model: FmuSource, platforms=PLATFORMS, jobs: int = 2, zig_versio
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
         binaries = dict(zip(jobs_list, pool.map(
             lambda job: compile_binary(model, header_dir, job[0], job[1], zig_version), jobs_list)))
-    files = fmu_files(model, {2: pretty_xml(description2), 3: pretty_xml(description3)}, header, binaries, targets)
+    files = fmu_files(model, {2: pretty_xml(description2), 3: pretty_xml(description3)}, header, binaries, targets,
+                      source_files(model))
     paths = fmu_paths()[model.model_identifier]
     atomic_write(paths[2], zip_archive(files[2]))
     atomic_write(paths[3], zip_archive(files[3]))

@@ -58,12 +58,14 @@ def zip_archive(files: dict[str, bytes]) -> bytes:
 
 
 def fmu_files(model: fmu_catalog.FmuSource, descriptions: dict[int, bytes], header: Path, binaries: dict,
-              targets) -> dict[int, dict[str, bytes]]:
+              targets, generated: dict[int, dict[str, bytes]] | None = None) -> dict[int, dict[str, bytes]]:
     """{FMI version: {archive path: bytes}}: the description, the sources (the layer, the model's C
-    files, its generated header) and each target's binary (``binaries[(version, target)]``)."""
+    files, its generated header), each target's binary (``binaries[(version, target)]``) and the
+    ``generated`` files of each version (native_build.sources: what compiles the sources)."""
     name = model.model_identifier
     sources = {f"sources/{p.name}": p.read_bytes() for p in (*LAYER, *model.c_sources, *model.c_headers, header)}
-    files = {version: {"modelDescription.xml": descriptions[version], **sources} for version in (2, 3)}
+    files = {version: {"modelDescription.xml": descriptions[version], **sources,
+                       **(generated or {}).get(version, {})} for version in (2, 3)}
     darwin = [binaries[(2, t)].read_bytes() for t in targets if t.platform == "darwin64"]
     for target in targets:
         if target.platform != "darwin64":
