@@ -49,7 +49,7 @@ import c_toolchain
 import fmu_catalog
 from c_toolchain import WORK_DIR, NativeBuildError, compiler_available
 from fmu_catalog import FMI3_DIR, NATIVE_DIR, FmuSource
-from native_build import LAYER, ROOT
+from native_build import LAYER, ROOT, ls_ref
 from native_build.compiler import compile_binary
 from native_build.description import fmi2_description, fmi3_description, model_guid, pretty_xml
 from native_build.header import variables_header
@@ -108,7 +108,8 @@ def _stamp(model: FmuSource, platforms) -> str:
     digest = hashlib.sha256(",".join(sorted(platforms)).encode())
     # this module, the build's stages, the toolchain's flags and the FMU tables are inputs too
     for path in (*LAYER, *model.c_sources, *model.c_headers, *model.sources, Path(__file__), *STAGES,
-                 Path(c_toolchain.__file__), Path(fmu_catalog.__file__), Path(plant_registry.__file__)):
+                 Path(c_toolchain.__file__), Path(fmu_catalog.__file__), Path(plant_registry.__file__),
+                 *sorted(ls_ref.EXPERIMENTS.glob("*"))):  # the stored FMI-LS-REF experiments
         digest.update(path.read_bytes())
     return digest.hexdigest()
 
