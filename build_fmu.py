@@ -19,6 +19,7 @@ import tempfile
 from pathlib import Path
 
 import build_native
+from native_build import ls_ref
 from fmu_catalog import FMUS, FmuSource, model_class, ordinary_file_mode, selected_edition
 from fmu_staging import stage
 from harness.scenario import keys_markdown
@@ -30,10 +31,10 @@ def is_stale(fmu: FmuSource) -> bool:
     if not fmu.fmu_path.exists():
         return True
     built = fmu.fmu_path.stat().st_mtime
-    return any(source.stat().st_mtime > built for source in fmu.sources)
+    return any(source.stat().st_mtime > built for source in (*fmu.sources, *ls_ref.EXPERIMENTS.glob("*")))
 
 
-def build_script(script: Path, fmu_path: Path, project_files) -> Path:
+def build_script(script: Path, fmu_path: Path, project_files, ls_ref_model: str | None = None) -> Path:
     """Build one FMU with pythonfmu's builder in a fresh interpreter.
 
     A fresh process because a process that has loaded one of our FMUs may
@@ -51,6 +52,8 @@ def build_script(script: Path, fmu_path: Path, project_files) -> Path:
     os.close(handle)
     try:
         _run_builder(script, Path(partial), project_files, fmu_path.name)
+        if ls_ref_model is not None:  # the catalog's FMUs carry FMI-LS-REF (native_build/ls_ref.py)
+            _embed_ls_ref(Path(partial), ls_ref_model, fmu_path.name)
         ordinary_file_mode(partial)
         os.replace(partial, fmu_path)
     finally:
@@ -75,8 +78,18 @@ def _run_builder(script: Path, fmu_path: Path, project_files, label: str):
         raise RuntimeError(f"building {label} from {script} failed:\n{completed.stderr}")
 
 
+def _embed_ls_ref(fmu_path: Path, model: str, label: str):
+    """Append the FMU's FMI-LS-REF files (native_build/ls_ref.py), in a fresh interpreter for the reason
+    above: making the reference runs the FMU."""
+    environment = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    completed = subprocess.run([sys.executable, "-m", "native_build.ls_ref", str(fmu_path), model], cwd=ROOT,
+                               env=environment, capture_output=True, text=True)
+    if completed.returncode != 0:
+        raise RuntimeError(f"adding FMI-LS-REF to {label} failed:\n{completed.stderr}")
+
+
 def build(fmu: FmuSource) -> Path:
-    return build_script(fmu.script, fmu.fmu_path, fmu.project_files)
+    return build_script(fmu.script, fmu.fmu_path, fmu.project_files, fmu.model_identifier)
 
 
 BUILD_EDITIONS = ("python", "native", "all")  # what this script builds (native: FMI 2.0 and 3.0)

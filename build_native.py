@@ -1,7 +1,7 @@
 """Build the native edition of the FMUs: the same four models in C, FMI 2.0 and FMI 3.0.
 
     python build_fmu.py --edition native            # via the project's build script
-    python build_native.py [--targets linux64,win64,darwin64] [--force]
+    python build_native.py [--targets linux64,win64,darwin64,aarch64-linux] [--force]
 
 From each FMU's declaration table (the ``VARIABLES`` of its pythonfmu class) the
 stages of :mod:`native_build` (one module each) generate
@@ -21,14 +21,15 @@ stages of :mod:`native_build` (one module each) generate
 then compiles ``fmu_src/fmi_layer.c`` with the model's C files with zig's C compiler
 (``pip install ziglang``, the ``native`` extra) for
 
-=========  ===================================  ==========================  ==========================
-platform   zig target                           FMI 2.0 folder              FMI 3.0 folder
-=========  ===================================  ==========================  ==========================
-linux64    x86_64-linux-gnu.2.17 (glibc 2.17)   binaries/linux64            binaries/x86_64-linux
-win64      x86_64-windows-gnu (UCRT)            binaries/win64              binaries/x86_64-windows
-darwin64   x86_64-macos.10.13, aarch64-macos.11 binaries/darwin64 (fat:     binaries/x86_64-darwin,
-                                                both architectures)         binaries/aarch64-darwin
-=========  ===================================  ==========================  ==========================
+=============  ===================================  ==========================  ==========================
+platform       zig target                           FMI 2.0 folder              FMI 3.0 folder
+=============  ===================================  ==========================  ==========================
+linux64        x86_64-linux-gnu.2.17 (glibc 2.17)   binaries/linux64            binaries/x86_64-linux
+win64          x86_64-windows-gnu (UCRT)            binaries/win64              binaries/x86_64-windows
+darwin64       x86_64-macos.10.13, aarch64-macos.11 binaries/darwin64 (fat:     binaries/x86_64-darwin,
+                                                    both architectures)         binaries/aarch64-darwin
+aarch64-linux  aarch64-linux-gnu.2.17 (glibc 2.17)  binaries/aarch64-linux      binaries/aarch64-linux
+=============  ===================================  ==========================  ==========================
 
 Compiled binaries are cached under build/native/obj by a hash of their inputs (sources,
 generated header, flags, compiler version), so a rebuild compiles only what changed;
@@ -49,11 +50,12 @@ import c_toolchain
 import fmu_catalog
 from c_toolchain import WORK_DIR, NativeBuildError, compiler_available
 from fmu_catalog import FMI3_DIR, NATIVE_DIR, FmuSource
-from native_build import LAYER, ROOT
+from native_build import LAYER, ROOT, ls_ref
 from native_build.compiler import compile_binary
 from native_build.description import fmi2_description, fmi3_description, model_guid, pretty_xml
 from native_build.header import variables_header
 from native_build.package import atomic_write, fmu_files, zip_archive
+from native_build.sources import add_source_files, source_files
 from native_build.targets import PLATFORMS, selected_targets
 from plants import registry as plant_registry
 
@@ -81,6 +83,7 @@ def build_model(model: FmuSource, platforms=PLATFORMS, jobs: int = 2, zig_versio
     guid = model_guid(model.model_identifier)
     description2 = fmi2_description(model.model_identifier, guid)
     description3 = fmi3_description(description2)
+    add_source_files(description2, model)  # after the translation: FMI 3.0 has buildDescription.xml instead
     header_dir = WORK_DIR / "generated" / model.model_identifier
     header = header_dir / "model_variables.h"
     text = variables_header(model.model_identifier, guid)
@@ -91,7 +94,8 @@ def build_model(model: FmuSource, platforms=PLATFORMS, jobs: int = 2, zig_versio
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
         binaries = dict(zip(jobs_list, pool.map(
             lambda job: compile_binary(model, header_dir, job[0], job[1], zig_version), jobs_list)))
-    files = fmu_files(model, {2: pretty_xml(description2), 3: pretty_xml(description3)}, header, binaries, targets)
+    files = fmu_files(model, {2: pretty_xml(description2), 3: pretty_xml(description3)}, header, binaries, targets,
+                      source_files(model))
     paths = fmu_paths()[model.model_identifier]
     atomic_write(paths[2], zip_archive(files[2]))
     atomic_write(paths[3], zip_archive(files[3]))
@@ -105,7 +109,8 @@ def _stamp(model: FmuSource, platforms) -> str:
     digest = hashlib.sha256(",".join(sorted(platforms)).encode())
     # this module, the build's stages, the toolchain's flags and the FMU tables are inputs too
     for path in (*LAYER, *model.c_sources, *model.c_headers, *model.sources, Path(__file__), *STAGES,
-                 Path(c_toolchain.__file__), Path(fmu_catalog.__file__), Path(plant_registry.__file__)):
+                 Path(c_toolchain.__file__), Path(fmu_catalog.__file__), Path(plant_registry.__file__),
+                 *sorted(ls_ref.EXPERIMENTS.glob("*"))):  # the stored FMI-LS-REF experiments
         digest.update(path.read_bytes())
     return digest.hexdigest()
 
@@ -113,7 +118,7 @@ def _stamp(model: FmuSource, platforms) -> str:
 def ensure_built(platforms=None, force: bool = False, verbose: bool = False, jobs: int = 2) -> dict[str, dict[int, Path]]:
     """Build the native FMUs whose inputs changed; return {model identifier: {2: path, 3: path}}.
 
-    ``platforms`` defaults to $AFC_NATIVE_PLATFORMS (comma-separated) or all three.
+    ``platforms`` defaults to $AFC_NATIVE_PLATFORMS (comma-separated) or all of PLATFORMS.
     """
     if not compiler_available():
         raise NativeBuildError("the native edition needs zig's C compiler: pip install ziglang "

@@ -1,5 +1,5 @@
 """The FMU archives: modelDescription.xml, the sources, one binary per platform folder (a fat
-Mach-O for FMI 2.0's darwin64), zipped reproducibly and written atomically."""
+Mach-O for FMI 2.0's darwin64), the FMI-LS-REF files, zipped reproducibly and written atomically."""
 from __future__ import annotations
 
 import io
@@ -10,7 +10,7 @@ import zipfile
 from pathlib import Path
 
 import fmu_catalog
-from native_build import LAYER
+from native_build import LAYER, ls_ref
 
 
 def atomic_write(path: Path, data: bytes) -> None:
@@ -58,12 +58,15 @@ def zip_archive(files: dict[str, bytes]) -> bytes:
 
 
 def fmu_files(model: fmu_catalog.FmuSource, descriptions: dict[int, bytes], header: Path, binaries: dict,
-              targets) -> dict[int, dict[str, bytes]]:
+              targets, generated: dict[int, dict[str, bytes]] | None = None) -> dict[int, dict[str, bytes]]:
     """{FMI version: {archive path: bytes}}: the description, the sources (the layer, the model's C
-    files, its generated header) and each target's binary (``binaries[(version, target)]``)."""
+    files, its generated header), each target's binary (``binaries[(version, target)]``), the
+    ``generated`` files of each version (native_build.sources: what compiles the sources) and, where
+    the FMU runs on this machine, its FMI-LS-REF files."""
     name = model.model_identifier
     sources = {f"sources/{fmu_catalog.archive_name(p)}": p.read_bytes() for p in (*LAYER, *model.c_sources, *model.c_headers, header)}
-    files = {version: {"modelDescription.xml": descriptions[version], **sources} for version in (2, 3)}
+    files = {version: {"modelDescription.xml": descriptions[version], **sources,
+                       **(generated or {}).get(version, {})} for version in (2, 3)}
     darwin = [binaries[(2, t)].read_bytes() for t in targets if t.platform == "darwin64"]
     for target in targets:
         if target.platform != "darwin64":
@@ -71,4 +74,7 @@ def fmu_files(model: fmu_catalog.FmuSource, descriptions: dict[int, bytes], head
         files[3][f"binaries/{target.fmi3_folder}/{name}{target.extension}"] = binaries[(3, target)].read_bytes()
     if darwin:
         files[2][f"binaries/darwin64/{name}.dylib"] = fat_macho(darwin)
+    for version in (2, 3):  # FMI-LS-REF: the reference is this machine's run of the FMU (native_build.ls_ref)
+        if ls_ref.runs_here(files[version], version):
+            files[version].update(ls_ref.ls_ref_files(ls_ref.load(name), files[version]))
     return files

@@ -19,8 +19,10 @@ TARGETS = (
     Target("win64", "x86_64-windows-gnu", "x86_64-windows", ".dll"),
     Target("darwin64", "x86_64-macos.10.13", "x86_64-darwin", ".dylib"),
     Target("darwin64", "aarch64-macos.11.0", "aarch64-darwin", ".dylib"),
+    # FMI 2.0 standardises no folder for ARM Linux (linux64 is x86-64): the FMI 3.0 name serves both
+    Target("aarch64-linux", "aarch64-linux-gnu.2.17", "aarch64-linux", ".so"),
 )
-PLATFORMS = ("linux64", "win64", "darwin64")
+PLATFORMS = ("linux64", "win64", "darwin64", "aarch64-linux")
 
 
 def selected_targets(platforms) -> tuple[Target, ...]:

@@ -49,7 +49,7 @@ CHAINS = {
                              "scenario_file", "summary", "report", "comparison", "study", "command_line"),
     "harness.hosts": ("trajectory", "console_capture", "plain_fmpy", "host_runners", "host_registry", "matrix_row",
                       "matrix_prose", "matrix_report", "matrix"),
-    "native_build": ("targets", "model_exchange", "description", "header", "compiler", "package"),
+    "native_build": ("targets", "model_exchange", "description", "header", "compiler", "sources", "ls_ref", "package"),
 }
 #: packages whose every module is in their chain (harness/hosts/ holds other hosts' bindings beside its chain)
 WHOLE_CHAINS = ("harness.studies.tune", "native_build")

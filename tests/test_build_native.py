@@ -1,7 +1,7 @@
 """The native edition (C, FMI 2.0 and 3.0): binaries, API, descriptions, behaviour.
 
 The native FMUs are built once per session for the platforms in $AFC_NATIVE_PLATFORMS
-(default: linux64, win64, darwin64); the tests skip with a reason when zig's compiler
+(default: linux64, win64, darwin64, aarch64-linux); the tests skip with a reason when zig's compiler
 (pip install ziglang, the ``native`` extra) is not installed.
 """
 import math
@@ -58,10 +58,12 @@ def api_functions(version: int) -> set[str]:
 
 # ------------------------------------------------------------ binary formats
 def binary_kind(data: bytes) -> str:
-    """elf-x86_64, pe-x86_64, macho-x86_64, macho-arm64 or fat:<kinds> from the magic bytes."""
+    """elf-x86_64, elf-aarch64, pe-x86_64, macho-x86_64, macho-arm64 or fat:<kinds> from the magic bytes."""
     if data[:4] == ELF_MAGIC:
         machine = struct.unpack("<H", data[18:20])[0]
-        return "elf-x86_64" if data[4] == 2 and machine == 62 else f"elf-{machine}"
+        if data[4] != 2:
+            return f"elf32-{machine}"
+        return {62: "elf-x86_64", 183: "elf-aarch64"}.get(machine, f"elf-{machine}")
     if data[:2] == b"MZ":
         offset = struct.unpack("<I", data[0x3C:0x40])[0]
         assert data[offset:offset + 4] == b"PE\0\0"
@@ -83,10 +85,12 @@ def binary_kind(data: bytes) -> str:
 EXPECTED = {
     2: {"linux64": ("binaries/linux64/{}.so", "elf-x86_64"),
         "win64": ("binaries/win64/{}.dll", "pe-x86_64"),
-        "darwin64": ("binaries/darwin64/{}.dylib", "fat:macho-arm64,macho-x86_64")},
+        "darwin64": ("binaries/darwin64/{}.dylib", "fat:macho-arm64,macho-x86_64"),
+        "aarch64-linux": ("binaries/aarch64-linux/{}.so", "elf-aarch64")},
     3: {"linux64": ("binaries/x86_64-linux/{}.so", "elf-x86_64"),
         "win64": ("binaries/x86_64-windows/{}.dll", "pe-x86_64"),
-        "darwin64": ("binaries/x86_64-darwin/{}.dylib", "macho-x86_64")},
+        "darwin64": ("binaries/x86_64-darwin/{}.dylib", "macho-x86_64"),
+        "aarch64-linux": ("binaries/aarch64-linux/{}.so", "elf-aarch64")},
 }
 
 
@@ -144,17 +148,20 @@ def test_the_arm64_macos_binaries_are_signed_as_apple_silicon_requires(native, p
 
 def test_the_linux_binaries_need_only_libc_and_libm_of_glibc_2_17(native, platforms):
     lief = pytest.importorskip("lief")
-    if "linux64" not in platforms:
-        pytest.skip("linux64 not built")
+    folders = {"linux64": ((2, "linux64"), (3, "x86_64-linux")),
+               "aarch64-linux": ((2, "aarch64-linux"), (3, "aarch64-linux"))}
+    built = [pair for platform, pairs in folders.items() if platform in platforms for pair in pairs]
+    if not built:
+        pytest.skip("neither linux64 nor aarch64-linux built")
     for model in MODELS:
-        for version, folder in ((2, "linux64"), (3, "x86_64-linux")):
+        for version, folder in built:
             data = binaries(native[model][version])[f"binaries/{folder}/{model}.so"]
             elf = lief.parse(list(data))
-            assert sorted(elf.libraries) == ["libc.so.6", "libm.so.6"], model
+            assert sorted(elf.libraries) == ["libc.so.6", "libm.so.6"], (model, folder)
             versions = {requirement.name for requirement in
                         (aux for entry in elf.symbols_version_requirement for aux in entry.get_auxiliary_symbols())}
             newest = max(tuple(map(int, v.split("_")[1].split("."))) for v in versions if v.startswith("GLIBC_"))
-            assert newest <= (2, 17), f"{model}: needs {sorted(versions)}"
+            assert newest <= (2, 17), f"{model} ({folder}): needs {sorted(versions)}"
 
 
 # ------------------------------------------------------------- descriptions

@@ -1,4 +1,4 @@
-"""The third-order plant DcMotorArm and its closed loop with the order-3 controller (issue 17).
+"""The third-order plant DcMotorArm and its closed loop with the order-3 controller.
 
 The closed-loop check below is written from the equations (docs/general_order.md) with numpy and
 scipy only: it shares no code with fmu_src/ or plants/.

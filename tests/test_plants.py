@@ -1,4 +1,4 @@
-"""The plant FMUs InvertedPendulum, Manipulator and the TrackingReference (issue 3).
+"""The plant FMUs InvertedPendulum, Manipulator and the TrackingReference.
 
 Driven through fmpy's low-level API (FMU2Slave): accuracy against scipy's
 solve_ivp, the friction and payload outputs, the reference's feedthrough,

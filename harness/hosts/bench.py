@@ -318,7 +318,7 @@ def bench(scenario_name="pendulum_case1", controller=variants.PROPOSED, stop=2.0
     return figures
 
 
-TABLES_TARGET_S = {"native": 10.0, "native_me": 10.0}  # issues 16, 22: `tables --edition native [--algorithm me]`
+TABLES_TARGET_S = {"native": 10.0, "native_me": 10.0}  # `tables --edition native [--algorithm me]`
 
 
 def tables_wall_seconds(edition: str, stop: float | None = None, algorithm: str | None = None) -> float:

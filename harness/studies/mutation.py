@@ -44,8 +44,8 @@ CONTROLLER_TESTS = ("tests/test_adaptive_law_fmu.py", "tests/test_independent_lo
                     "tests/test_afc_math.py", "tests/test_adaptive_fuzzy_controller_fmu.py")
 PLANT_TESTS = ("tests/test_plants.py", "tests/test_independent_loop.py")
 REFERENCE_TESTS = ("tests/test_plants.py", "tests/test_independent_loop.py")
-GENERAL_TESTS = ("tests/test_general_order.py", "tests/test_afc_math.py")  # order n, m sets (issue 17)
-MOTOR_TESTS = ("tests/test_dc_motor_arm.py",)  # the third-order plant and its closed loop (issue 17)
+GENERAL_TESTS = ("tests/test_general_order.py", "tests/test_afc_math.py")  # order n, m sets (docs/general_order.md)
+MOTOR_TESTS = ("tests/test_dc_motor_arm.py",)  # the third-order plant and its closed loop
 TIMEOUT_S = 600
 SKIPPED_IN_COPY = {".git", ".venv", "build", "results", "__pycache__", ".pytest_cache"}
 
@@ -120,7 +120,7 @@ MUTATIONS = (
       "state[LATCHED + i] = state[LATCHED + n + i] = state[LATCHED + 2 * n + i] = float(sample[i])",
       "state[LATCHED + i] = state[LATCHED + n + i] = state[LATCHED + 2 * n + i] = float(sample[0])",
       CONTROLLER_TESTS, "de(0) latched as e(0) (Remark 3)"),
-    # --- the general controller: n inputs, m sets (issue 17)
+    # --- the general controller: n inputs, m sets (docs/general_order.md)
     M("membership_middle_sign", "fmu_src/afc_math.py", "memberships", "result.append(previous - rising)",
       "result.append(rising - previous)", GENERAL_TESTS, "middle sets sig(c_l) - sig(c_(l-1)): negative"),
     M("boundaries_spacing", "fmu_src/afc_math.py", "membership_boundaries", "-universe + 2.0 * universe * l / sets",
