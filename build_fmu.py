@@ -4,9 +4,9 @@
     python build_fmu.py --force    # rebuild all
     python build_fmu.py --docs     # also rewrite the generated tables of docs/ (FMU variables, scenario keys)
 
-Each FMU is one script (unique file name: pythonfmu loads all FMUs into one
-interpreter) plus its project files.  A build is stale when any source is
-newer than the FMU.
+Each FMU is one script plus its project files, staged under top-level names
+unique across the FMUs (fmu_staging.py: pythonfmu loads all FMUs into one
+interpreter).  A build is stale when any source is newer than the FMU.
 """
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ from pathlib import Path
 import build_native
 from native_build import ls_ref
 from fmu_catalog import FMUS, FmuSource, model_class, ordinary_file_mode, selected_edition
+from fmu_staging import stage
 from harness.scenario import keys_markdown
 
 ROOT = Path(__file__).resolve().parent
@@ -38,8 +39,9 @@ def build_script(script: Path, fmu_path: Path, project_files, ls_ref_model: str 
 
     A fresh process because a process that has loaded one of our FMUs may
     import ``pythonfmu`` from that FMU's resources (which hold no binaries).
-    The folders of the project files go on PYTHONPATH, so the script's own
-    imports resolve while the builder reads its model description.
+    The script and its project files are staged under their names inside the
+    FMU (fmu_staging.py), so the script's own imports resolve while the builder
+    reads its model description.
 
     The builder writes a temporary file in the same folder, which then replaces
     ``fmu_path`` in one step (``os.replace``): a reader never sees a half-written
@@ -61,13 +63,17 @@ def build_script(script: Path, fmu_path: Path, project_files, ls_ref_model: str 
 
 
 def _run_builder(script: Path, fmu_path: Path, project_files, label: str):
-    folders = list(dict.fromkeys(str(Path(p).resolve().parent) for p in (script, *project_files)))
-    environment = dict(os.environ, PYTHONPATH=os.pathsep.join(folders + [os.environ.get("PYTHONPATH", "")]))
-    code = ("import sys; from pythonfmu.builder import FmuBuilder; "
-            "FmuBuilder.build_FMU(sys.argv[1], dest=sys.argv[2], project_files=sys.argv[3:], "
-            "canGetAndSetFMUstate=True, canSerializeFMUstate=True)")
-    completed = subprocess.run([sys.executable, "-c", code, str(script), str(fmu_path),
-                                *map(str, project_files)], env=environment, capture_output=True, text=True)
+    """pythonfmu's builder on the files staged under their FMU names (fmu_staging.py) in a scratch folder,
+    which alone is on PYTHONPATH: the script imports them as the FMU will."""
+    with tempfile.TemporaryDirectory(prefix=".stage-", dir=fmu_path.parent) as folder:
+        staged_script, *staged_files = stage((script, *project_files), Path(folder))
+        environment = dict(os.environ, PYTHONPATH=os.pathsep.join([folder, os.environ.get("PYTHONPATH", "")]))
+        code = ("import sys; from pythonfmu.builder import FmuBuilder; "
+                "FmuBuilder.build_FMU(sys.argv[1], dest=sys.argv[2], project_files=sys.argv[3:], "
+                "canGetAndSetFMUstate=True, canSerializeFMUstate=True)")
+        completed = subprocess.run([sys.executable, "-c", code, str(staged_script), str(fmu_path),
+                                    *map(str, staged_files)], env=environment, capture_output=True, text=True,
+                                   cwd=folder)
     if completed.returncode != 0:
         raise RuntimeError(f"building {label} from {script} failed:\n{completed.stderr}")
 

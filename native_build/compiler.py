@@ -9,7 +9,7 @@ import fmpy
 
 import c_toolchain
 from c_toolchain import CFLAGS, WORK_DIR, NativeBuildError, compile_cached
-from fmu_catalog import FmuSource
+from fmu_catalog import FmuSource, archive_name
 from native_build import LAYER, ROOT
 from native_build.targets import Target
 
@@ -23,8 +23,25 @@ def fmi_headers() -> Path:
 
 
 
+def named_sources(model: FmuSource, header_dir: Path) -> tuple[Path, ...]:
+    """The model's C sources under the names they have in the FMU's sources/ (fmu_catalog.archive_name:
+    a model folder's model.c is copied into ``header_dir`` as <folder>.c), so the binary is the one a
+    build of the FMU's own sources makes (the linker's output follows the file names)."""
+    named = []
+    for path in model.c_sources:
+        name = archive_name(path)
+        if name != path.name:
+            copy = header_dir / name
+            if not copy.exists() or copy.read_bytes() != path.read_bytes():
+                copy.write_bytes(path.read_bytes())
+            path = copy
+        named.append(path)
+    return tuple(named)
+
+
 def compile_binary(model: FmuSource, header_dir: Path, fmi_version: int, target: Target, zig_version: str) -> Path:
     """One shared library, cached by the hash of everything that goes into it."""
+    sources = named_sources(model, header_dir)
     includes = (header_dir, fmi_headers(), LAYER[0].parent, *{p.parent for p in model.c_sources})
     arguments = ["cc", "-target", target.zig, "-shared", *CFLAGS, f"-DFMI_VERSION={fmi_version}",
                  "-g0", "-s"]  # no debug information, no symbol table beyond the exports: no build paths inside
@@ -34,7 +51,7 @@ def compile_binary(model: FmuSource, header_dir: Path, fmi_version: int, target:
         arguments.append(f"-Wl,-install_name,@rpath/{model.model_identifier}.dylib")
     arguments += [f"-I{folder}" for folder in includes]
     digest = hashlib.sha256("\0".join([zig_version, *arguments[:-len(includes)]]).encode())
-    for path in (*LAYER, *model.c_sources, *model.c_headers, header_dir / "model_variables.h",
+    for path in (*LAYER, *sources, *model.c_headers, header_dir / "model_variables.h",
                  fmi_headers() / f"fmi{fmi_version}Functions.h"):
         digest.update(path.name.encode())
         digest.update(path.read_bytes())
@@ -42,7 +59,7 @@ def compile_binary(model: FmuSource, header_dir: Path, fmi_version: int, target:
     if cached.exists():
         return cached
     return compile_cached(cached, f"{model.model_identifier}{target.extension}",
-                          [*arguments, "-o", "{output}", str(LAYER[0]), *map(str, model.c_sources)],
+                          [*arguments, "-o", "{output}", str(LAYER[0]), *map(str, sources)],
                           f"{model.model_identifier} (FMI {fmi_version}, {target.zig})")
 
 

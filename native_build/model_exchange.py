@@ -1,111 +1,26 @@
-"""What a native FMU declares for Model Exchange beside its variable table, and its XML
-(docs/model_exchange.md)."""
+"""The Model Exchange part of a native FMU's description: its XML, from the model's declaration
+(the ``model_exchange()`` of its script, fmu_src/afc_declaration.py; docs/model_exchange.md)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
 from xml.etree import ElementTree as ET
 
 from c_toolchain import NativeBuildError
-from fmu_catalog import model_class
-from fmu_src.afc_slave_base import INPUT, OUTPUT, PARAMETER, _unknown, initial_dependencies
+from fmu_catalog import ROOT, declaration, fmu, model_class
+from fmu_src.afc_declaration import Derivative, EventIndicator, ModelExchange
+from fmu_src.afc_slave_base import _unknown, initial_dependencies
 
-
-@dataclass(frozen=True)
-class Derivative:
-    """der(state): the right-hand side of one continuous state."""
-    state: str  # the table variable that is the state
-    depends_on: tuple  # ((known, dependenciesKind), ...): the states and inputs it depends on
-    parameters: tuple = ()  # the parameters it depends on (its value in initialization mode)
-    description: str = ""
-
-
-@dataclass(frozen=True)
-class EventIndicator:
-    name: str
-    description: str
-    depends_on: tuple = ()  # ((known, dependenciesKind), ...): states and inputs
-
-
-@dataclass(frozen=True)
-class ModelExchange:
-    """What a native FMU declares for Model Exchange beside its table (docs/model_exchange.md).
-
-    The continuous states are table variables (the plants' y, dy, ...; the controller's theta_j
-    and w_hat), in the order of ``derivatives``; the description adds der(<state>), the event
-    indicators and the model's other ``locals`` (discrete) after the table, with the value
-    references N + 1, ... (N, the table's length, is FMI 3.0's time).  ``output_states`` gives
-    the states an output depends on (Model Exchange knowns beside the inputs); ``reinit`` the
-    states an event may reset.  The C model file's hooks (fmi_layer.h) follow the same order.
-    """
-    derivatives: tuple = ()
-    output_states: tuple = ()  # ((output, ((state, dependenciesKind), ...)), ...)
-    event_indicators: tuple = ()
-    locals: tuple = ()  # ((name, description), ...)
-    reinit: tuple = ()
-
-    @property
-    def states(self) -> tuple:
-        return tuple(d.state for d in self.derivatives)
-
-    def extra_names(self) -> list:
-        """The names of the variables after the table, in value-reference order."""
-        return ([f"der({d.state})" for d in self.derivatives] + [e.name for e in self.event_indicators]
-                + [name for name, _ in self.locals])
-
-
-MODEL_EXCHANGE = {
-    "InvertedPendulum": ModelExchange(
-        derivatives=(Derivative("y", (("dy", "constant"),), (), "dx1 = x2 (37)"),
-                     Derivative("dy", (("y", "dependent"), ("dy", "dependent"), ("u", "dependent")),
-                                ("gv", "mc", "mp", "lp", "dist_gain"), "dx2 of (37) with d(t)"))),
-    "Manipulator": ModelExchange(
-        derivatives=(Derivative("y", (("dy", "constant"),), (), "dx1 = x2 (38)"),
-                     Derivative("dy", (("y", "dependent"), ("dy", "dependent"), ("u", "dependent")),
-                                ("gv", "lr", "dr", "cr", "vr", "mr0", "mr1"),
-                                "dx2 of (38, 39) in the friction mode (0 while stuck)")),
-        output_states=(("d", (("dy", "dependent"),)),),
-        event_indicators=(
-            EventIndicator("z_slip", "slip indicator: friction_mode x2 + 1e-10 rad/s while slipping (zero when "
-                                     "the link comes to rest), 1e-10 while stuck", (("dy", "discrete"),)),
-            EventIndicator("z_stick", "stick indicator: cr while slipping; cr - |u - mr gv lr cos x1| while "
-                                      "stuck (zero at break-away)", (("y", "dependent"), ("u", "dependent")))),
-        locals=(("friction_mode", "Model Exchange friction mode: 1 slipping forwards, -1 backwards, 0 stuck "
-                                  "(co-simulation: sgn(x2))"),),
-        reinit=("dy",)),
-    "DcMotorArm": ModelExchange(
-        derivatives=(Derivative("y", (("dy", "constant"),), (), "dx1 = x2"),
-                     Derivative("dy", (("y", "dependent"), ("dy", "fixed"), ("i", "fixed")),
-                                ("J", "b", "m", "lc", "gv", "Kt"), "dx2 = (Kt x3 - b x2 - m gv lc sin x1) / J"),
-                     Derivative("i", (("dy", "fixed"), ("i", "fixed"), ("u", "fixed")), ("Ke", "R", "L"),
-                                "dx3 = (u - R x3 - Ke x2) / L")),
-        output_states=(("d2y", (("y", "dependent"), ("dy", "fixed"), ("i", "fixed"))),)),
-    "TrackingReference": ModelExchange(),
-}
-
-
-def _controller_model_exchange() -> ModelExchange:
-    """theta1..thetaN (N = the table's rule weights) and w_hat: dtheta_j = gamma tau xi_j with the
-    projection (31), dw_hat = gamma_w tau (variant 3; else 0); tau and xi depend on every input."""
-    table = model_class("AdaptiveFuzzyController").VARIABLES
-    inputs = tuple((v.name, "dependent") for v in table if v.causality == INPUT)
-    parameters = tuple(v.name for v in table if v.causality == PARAMETER)
-    thetas = [v.name for v in table if v.causality == OUTPUT and v.name.startswith("theta") and v.name[5:].isdigit()]
-    derivatives = tuple(Derivative(name, ((name, "dependent"), *inputs), parameters,
-                                   f"d{name} of the adaptive law with projection (31)") for name in thetas)
-    derivatives += (Derivative("w_hat", inputs, parameters, "dw_hat = gamma_w tau (variant 3; else 0)"),)
-    return ModelExchange(derivatives=derivatives,
-                         output_states=(("u", (*((name, "dependent") for name in thetas), ("w_hat", "fixed"))),))
+__all__ = ["Derivative", "EventIndicator", "ModelExchange", "add_model_exchange", "event_indicator_elements",
+           "model_exchange"]
 
 
 def model_exchange(model_identifier: str) -> ModelExchange:
-    """The Model Exchange declaration of a native FMU."""
-    if model_identifier == "AdaptiveFuzzyController":
-        return _controller_model_exchange()
-    if model_identifier not in MODEL_EXCHANGE:  # a plant row of plants/registry.py without its entry here
-        raise NativeBuildError(f"native_build/model_exchange.py: MODEL_EXCHANGE has no entry for {model_identifier!r} (every FMU "
-                               "of plants/registry.py needs one: its continuous states and their derivatives, "
-                               "docs/model_exchange.md)")
-    return MODEL_EXCHANGE[model_identifier]
+    """The Model Exchange declaration of a native FMU: its script's ``model_exchange()``."""
+    declared = getattr(declaration(model_identifier), "model_exchange", None)
+    if declared is None:  # a model folder whose fmu.py lacks it
+        raise NativeBuildError(f"{fmu(model_identifier).script.relative_to(ROOT)}: "
+                               f"{model_identifier} declares no model_exchange() (every FMU with a C edition needs "
+                               "one: its continuous states and their derivatives, docs/model_exchange.md)")
+    return declared()
 
 
 def _derivative_unit(unit: str) -> str:

@@ -64,7 +64,7 @@ def fmu_files(model: fmu_catalog.FmuSource, descriptions: dict[int, bytes], head
     ``generated`` files of each version (native_build.sources: what compiles the sources) and, where
     the FMU runs on this machine, its FMI-LS-REF files."""
     name = model.model_identifier
-    sources = {f"sources/{p.name}": p.read_bytes() for p in (*LAYER, *model.c_sources, *model.c_headers, header)}
+    sources = {f"sources/{fmu_catalog.archive_name(p)}": p.read_bytes() for p in (*LAYER, *model.c_sources, *model.c_headers, header)}
     files = {version: {"modelDescription.xml": descriptions[version], **sources,
                        **(generated or {}).get(version, {})} for version in (2, 3)}
     darwin = [binaries[(2, t)].read_bytes() for t in targets if t.platform == "darwin64"]

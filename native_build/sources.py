@@ -29,7 +29,7 @@ def fmi2_unit_text() -> bytes:
 def compilation_units(model: fmu_catalog.FmuSource, fmi_version: int) -> tuple[str, ...]:
     """The files of ``sources/`` compiled one by one into the FMU's binary, the layer first."""
     layer = FMI2_UNIT if fmi_version == 2 else LAYER[0].name
-    return (layer, *(path.name for path in model.c_sources))
+    return (layer, *(fmu_catalog.archive_name(path) for path in model.c_sources))
 
 
 def add_source_files(fmi2_root: ET.Element, model: fmu_catalog.FmuSource) -> None:

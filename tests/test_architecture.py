@@ -31,7 +31,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-TOP_LEVEL_MODULES = ("build_fmu", "build_native", "fmu_catalog", "c_toolchain")
+TOP_LEVEL_MODULES = ("build_fmu", "build_native", "fmu_catalog", "fmu_staging", "c_toolchain")
 PACKAGES = ("harness", "plants", "fmu_src", "native_build")
 #: the co-simulation core at the top of harness/ (docs/architecture.md); anything else goes in a sub-package
 CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harness.scenario", "harness.variants",

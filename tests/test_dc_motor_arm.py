@@ -12,7 +12,9 @@ from scipy.linalg import solve_continuous_lyapunov
 
 from harness import scenario as scenarios
 from harness.master import simulate
-from plants import dc_motor_arm_model, inverted_pendulum_model, plant_integration
+from plants import plant_integration
+from plants.dc_motor_arm import model as dc_motor_arm_model
+from plants.inverted_pendulum import model as inverted_pendulum_model
 
 
 def test_n_state_rk4_gives_the_two_state_results_bit_for_bit():
