@@ -108,6 +108,12 @@ def fmi3_description(fmi2_root: ET.Element) -> ET.Element:
         unit_definitions = ET.SubElement(root, "UnitDefinitions")
         for unit in units:
             ET.SubElement(unit_definitions, "Unit", name=unit.get("name"))
+    types = fmi2_root.find("TypeDefinitions")
+    if types is not None:
+        type_definitions = ET.SubElement(root, "TypeDefinitions")
+        for simple in types:
+            ET.SubElement(type_definitions, "Float64Type", name=simple.get("name"),
+                          description=simple.get("description"), quantity=simple[0].get("quantity"))
     categories = fmi2_root.find("LogCategories")
     if categories is not None:
         log_categories = ET.SubElement(root, "LogCategories")
@@ -127,6 +133,8 @@ def fmi3_description(fmi2_root: ET.Element) -> ET.Element:
         for key in ("description", "causality", "variability", "initial"):
             if scalar.get(key) is not None:
                 element.set(key, scalar.get(key))
+        if typed.get("declaredType") is not None:
+            element.set("declaredType", typed.get("declaredType"))
         for key in ("start", "unit", "min", "max", "reinit"):
             if typed.get(key) is not None:
                 element.set(key, typed.get(key))

@@ -196,6 +196,26 @@ def _normalized_start(rows):
     return rows
 
 
+def test_the_controllers_signals_declare_the_plants_quantities_in_both_editions_and_fmi_versions(native, fmu_paths):
+    """e, de, ym, dym, u, E, ... carry a declaredType naming the plant's quantity whose unit they take;
+    fmpy's validation (the schema, every declaredType defined) passes on each description."""
+    from fmpy.validation import validate_fmu
+
+    cls = build_fmu.model_class("AdaptiveFuzzyController")
+    expected = {v.name: v.declared_type for v in cls.VARIABLES if v.declared_type}
+    assert {"e", "de", "ym", "dym", "u", "E", "dE", "d2e", "d3e", "d2ym", "d3ym"} <= set(expected)
+    for path, pattern in ((fmu_paths["AdaptiveFuzzyController"], rb'<ScalarVariable name="(\w+)"[^>]*>\s*<Real[^>]*declaredType="(\w+)"'),
+                          (native["AdaptiveFuzzyController"][2], rb'<ScalarVariable name="(\w+)"[^>]*>\s*<Real[^>]*declaredType="(\w+)"'),
+                          (native["AdaptiveFuzzyController"][3], rb'<Float64 name="(\w+)"[^>]*declaredType="(\w+)"')):
+        with zipfile.ZipFile(path) as archive:
+            text = archive.read("modelDescription.xml")
+        found = {m.group(1).decode(): m.group(2).decode() for m in re.finditer(pattern, text)}
+        assert found == expected, path
+        for name in set(expected.values()):
+            assert f'name="{name}"'.encode() in text.split(b"<ModelVariables>")[0], (path, name)
+        assert validate_fmu(str(path)) == [], path
+
+
 @pytest.mark.parametrize("model", MODELS)
 def test_native_descriptions_carry_the_generation_date_of_their_sources(native, model, monkeypatch):
     """generationDateAndTime in both FMI versions: SOURCE_DATE_EPOCH, else the sources' last commit, in UTC."""
