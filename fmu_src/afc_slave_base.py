@@ -109,6 +109,17 @@ class Tuning:
         return None
 
 
+# The types a signal whose unit is another FMU's declares (FMI's declaredType: a SimpleType naming the
+# quantity): the controller serves any plant, so its signals carry the plant's units
+DECLARED_TYPES = {
+    "PlantOutput": "in the unit of the plant's output y (rad for the project's plants)",
+    "PlantOutputRate": "in the unit of y per second (rad/s for the project's plants)",
+    "PlantOutputAcceleration": "in the unit of y per second squared (rad/s2 for the project's plants)",
+    "PlantOutputJerk": "in the unit of y per second cubed (rad/s3 for the project's plants)",
+    "PlantInput": "in the unit of the plant's input u (N, N.m or V for the project's plants)",
+}
+
+
 @dataclass(frozen=True)
 class Variable:
     """One row of an FMU's variable table."""
@@ -131,6 +142,9 @@ class Variable:
     # the knowns of FMI's InitialUnknowns); None: every parameter and depends_on (conservative)
     initial_depends_on: tuple[str, ...] | None = None
     tuning: Tuning | None = None  # parameters: where `harness tune` searches it (None: not tuned)
+    # a signal whose unit is another FMU's (the controller's e: the plant output's): a key of
+    # DECLARED_TYPES, written as FMI's declaredType
+    declared_type: str = ""
 
     def valid_range(self) -> str:
         """The valid range as text, e.g. ``(0, 1)``, ``> 0``, ``{1, 2, 3}``."""
@@ -416,10 +430,17 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
         root = super().to_xml(model_options)
         index = {v.name: i + 1 for i, v in enumerate(self.VARIABLES)}
         units = sorted({v.unit for v in self.VARIABLES if v.unit})
+        used = {v.declared_type for v in self.VARIABLES if v.declared_type}
+        declared_types = {name: meaning for name, meaning in DECLARED_TYPES.items() if name in used}
         for element, v in zip(root.find("ModelVariables"), self.VARIABLES):
             typed = element[0]
             if v.unit:
                 typed.set("unit", v.unit)
+            if v.declared_type:
+                if v.declared_type not in DECLARED_TYPES:
+                    raise ValueError(f"{v.name}: declared_type {v.declared_type!r} is invalid; valid: "
+                                     f"one of {sorted(DECLARED_TYPES)}")
+                typed.set("declaredType", v.declared_type)
             if v.causality == PARAMETER and v.minimum is not None and not v.exclusive_minimum:
                 typed.set("min", str(int(v.minimum)) if v.kind == "Integer" else f"{v.minimum:.16g}")
             if v.causality == PARAMETER and v.maximum is not None and not v.exclusive_maximum:
@@ -430,6 +451,15 @@ class TableSlave(Fmi2Slave, metaclass=_SlaveMeta):
                 SubElement(unit_definitions, "Unit", name=unit)
             position = list(root).index(root.find("CoSimulation")) + 1
             root.insert(position, unit_definitions)
+        if declared_types:  # FMI 2.0: TypeDefinitions after UnitDefinitions, before LogCategories
+            type_definitions = Element("TypeDefinitions")
+            for name, meaning in declared_types.items():
+                simple = SubElement(type_definitions, "SimpleType", name=name, description=meaning)
+                SubElement(simple, "Real", quantity=name)
+            anchor = root.find("UnitDefinitions")
+            if anchor is None:
+                anchor = root.find("CoSimulation")
+            root.insert(list(root).index(anchor) + 1, type_definitions)
         structure = root.find("ModelStructure")
         for child in list(structure):
             structure.remove(child)

@@ -2,7 +2,10 @@
 with Model Exchange added, and FMI 3.0 translated from it; the GUID fixed by their inputs."""
 from __future__ import annotations
 
+import datetime
 import hashlib
+import os
+import subprocess
 import uuid
 from xml.dom import minidom
 from xml.etree import ElementTree as ET
@@ -13,6 +16,33 @@ from native_build import LAYER, ROOT
 from native_build.model_exchange import add_model_exchange, event_indicator_elements, model_exchange
 
 GENERATION_TOOL = "afc-fmi native edition (build_native.py)"
+
+
+def model_sources(model_identifier: str) -> tuple:
+    """Every file the native FMU is made from: its Python declaration, the FMI layer, its C sources."""
+    model = fmu_catalog.fmu(model_identifier)
+    return (*model.sources, *LAYER, *model.c_sources, *model.c_headers)
+
+
+def generation_date_and_time(model_identifier: str) -> str:
+    """The FMU's generationDateAndTime, fixed by its sources so that a rebuild is bit-identical:
+    SOURCE_DATE_EPOCH (seconds since 1970, UTC) when set, else the date of the last commit that
+    touched one of its sources, else the newest modification time of those files; in UTC, to the second."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    if epoch is not None:
+        if not epoch.strip().isdigit():
+            raise ValueError(f"SOURCE_DATE_EPOCH = {epoch!r} is invalid; valid: a whole number of seconds >= 0")
+        seconds = int(epoch)
+    else:
+        paths = [str(p) for p in model_sources(model_identifier)]
+        try:
+            found = subprocess.run(["git", "log", "-1", "--format=%ct", "--", *paths], cwd=ROOT,
+                                   capture_output=True, text=True, check=True).stdout.strip()
+        except (OSError, subprocess.CalledProcessError):
+            found = ""
+        seconds = int(found) if found else int(max(os.path.getmtime(p) for p in paths))
+    stamp = datetime.datetime.fromtimestamp(seconds, datetime.timezone.utc)
+    return stamp.isoformat(timespec="seconds").replace("+00:00", "Z")
 
 
 def _pythonfmu_description(model_identifier: str) -> ET.Element:
@@ -45,7 +75,7 @@ def fmi2_description(model_identifier: str, guid: str) -> ET.Element:
     root = _pythonfmu_description(model_identifier)
     root.set("guid", guid)
     root.set("generationTool", GENERATION_TOOL)
-    root.attrib.pop("generationDateAndTime", None)
+    root.set("generationDateAndTime", generation_date_and_time(model_identifier))
     cosim = root.find("CoSimulation")
     cosim.set("needsExecutionTool", "false")
     cosim.set("canNotUseMemoryManagementFunctions", "true")
@@ -59,7 +89,8 @@ def fmi2_description(model_identifier: str, guid: str) -> ET.Element:
 def fmi3_description(fmi2_root: ET.Element) -> ET.Element:
     """The FMI 3.0 description translated from the FMI 2.0 one (same variables)."""
     attributes = {k: v for k, v in fmi2_root.attrib.items()
-                  if k in ("modelName", "description", "author", "version", "generationTool")}
+                  if k in ("modelName", "description", "author", "version", "generationTool",
+                            "generationDateAndTime")}
     root = ET.Element("fmiModelDescription", fmiVersion="3.0",
                       instantiationToken=fmi2_root.get("guid"), variableNamingConvention="structured",
                       **attributes)
@@ -77,6 +108,12 @@ def fmi3_description(fmi2_root: ET.Element) -> ET.Element:
         unit_definitions = ET.SubElement(root, "UnitDefinitions")
         for unit in units:
             ET.SubElement(unit_definitions, "Unit", name=unit.get("name"))
+    types = fmi2_root.find("TypeDefinitions")
+    if types is not None:
+        type_definitions = ET.SubElement(root, "TypeDefinitions")
+        for simple in types:
+            ET.SubElement(type_definitions, "Float64Type", name=simple.get("name"),
+                          description=simple.get("description"), quantity=simple[0].get("quantity"))
     categories = fmi2_root.find("LogCategories")
     if categories is not None:
         log_categories = ET.SubElement(root, "LogCategories")
@@ -96,6 +133,8 @@ def fmi3_description(fmi2_root: ET.Element) -> ET.Element:
         for key in ("description", "causality", "variability", "initial"):
             if scalar.get(key) is not None:
                 element.set(key, scalar.get(key))
+        if typed.get("declaredType") is not None:
+            element.set("declaredType", typed.get("declaredType"))
         for key in ("start", "unit", "min", "max", "reinit"):
             if typed.get(key) is not None:
                 element.set(key, typed.get(key))

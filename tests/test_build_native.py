@@ -203,6 +203,57 @@ def _normalized_start(rows):
     return rows
 
 
+def test_the_controllers_signals_declare_the_plants_quantities_in_both_editions_and_fmi_versions(native, fmu_paths):
+    """e, de, ym, dym, u, E, ... carry a declaredType naming the plant's quantity whose unit they take;
+    fmpy's validation (the schema, every declaredType defined) passes on each description."""
+    from fmpy.validation import validate_fmu
+
+    cls = build_fmu.model_class("AdaptiveFuzzyController")
+    expected = {v.name: v.declared_type for v in cls.VARIABLES if v.declared_type}
+    assert {"e", "de", "ym", "dym", "u", "E", "dE", "d2e", "d3e", "d2ym", "d3ym"} <= set(expected)
+    for path, pattern in ((fmu_paths["AdaptiveFuzzyController"], rb'<ScalarVariable name="(\w+)"[^>]*>\s*<Real[^>]*declaredType="(\w+)"'),
+                          (native["AdaptiveFuzzyController"][2], rb'<ScalarVariable name="(\w+)"[^>]*>\s*<Real[^>]*declaredType="(\w+)"'),
+                          (native["AdaptiveFuzzyController"][3], rb'<Float64 name="(\w+)"[^>]*declaredType="(\w+)"')):
+        with zipfile.ZipFile(path) as archive:
+            text = archive.read("modelDescription.xml")
+        found = {m.group(1).decode(): m.group(2).decode() for m in re.finditer(pattern, text)}
+        assert found == expected, path
+        for name in set(expected.values()):
+            assert f'name="{name}"'.encode() in text.split(b"<ModelVariables>")[0], (path, name)
+        assert validate_fmu(str(path)) == [], path
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_native_descriptions_carry_the_generation_date_of_their_sources(native, model, monkeypatch):
+    """generationDateAndTime in both FMI versions: SOURCE_DATE_EPOCH, else the sources' last commit, in UTC."""
+    import datetime
+    import subprocess
+
+    stamps = set()
+    for version in (2, 3):
+        with zipfile.ZipFile(native[model][version]) as archive:
+            stamp = re.search(rb'generationDateAndTime="([^"]+)"', archive.read("modelDescription.xml"))
+        assert stamp is not None, (model, version)
+        stamps.add(stamp.group(1).decode())
+    assert len(stamps) == 1 and datetime.datetime.fromisoformat(stamps.pop()).utcoffset() == datetime.timedelta(0)
+    monkeypatch.delenv("SOURCE_DATE_EPOCH", raising=False)
+    committed = subprocess.run(["git", "log", "-1", "--format=%ct", "--",
+                                *map(str, description.model_sources(model))],
+                               cwd=native_build.ROOT, capture_output=True, text=True).stdout.strip()
+    if committed:  # a git checkout: the date of the last commit that touched a source
+        expected = datetime.datetime.fromtimestamp(int(committed), datetime.timezone.utc)
+        assert description.generation_date_and_time(model) == expected.strftime("%Y-%m-%dT%H:%M:%SZ")
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "86400")
+    assert description.generation_date_and_time(model) == "1970-01-02T00:00:00Z"
+    root = description.fmi2_description(model, "{guid}")
+    assert root.get("generationDateAndTime") == "1970-01-02T00:00:00Z"
+    assert description.fmi3_description(root).get("generationDateAndTime") == "1970-01-02T00:00:00Z"
+    assert description.pretty_xml(description.fmi2_description(model, "{guid}")) == description.pretty_xml(root)
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "yesterday")
+    with pytest.raises(ValueError, match="SOURCE_DATE_EPOCH = 'yesterday' is invalid"):
+        description.generation_date_and_time(model)
+
+
 @pytest.mark.parametrize("model", MODELS)
 def test_native_binaries_carry_no_build_path(native, model):
     for version in (2, 3):

@@ -20,6 +20,8 @@ import math
 
 # pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
 # so the project's base class is imported under that name.
+from pythonfmu import DefaultExperiment
+
 from fmu_src.afc_declaration import ModelExchange, TestDrive
 from fmu_src.afc_slave_base import INPUT, OUTPUT, Variable, finite, positive
 from fmu_src.afc_slave_base import TableSlave as Fmi2Slave
@@ -64,6 +66,8 @@ def test_drive() -> TestDrive:
 
 
 class TrackingReference(Fmi2Slave):
+    # No continuous state: the tolerance does not act; the plants' one, for a host integrating the loop
+    default_experiment = DefaultExperiment(tolerance=1e-8)
     VARIABLES = VARIABLES
     MODEL_DESCRIPTION = ("Sinusoidal reference ym = A sin(omega t) with its derivatives and the "
                          "tracking errors e = ym - y, de = dym - dy")
