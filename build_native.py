@@ -570,9 +570,22 @@ def build_model(model: FmuSource, platforms=PLATFORMS, jobs: int = 2, zig_versio
         _atomic_write(header, text.encode())
     targets = _selected(platforms)
     jobs_list = [(version, target) for version in (2, 3) for target in targets]
+    say = (lambda text: print(f"native: {text}", file=sys.stderr, flush=True)) if verbose else (lambda text: None)
+    say(f"{model.model_identifier}: {len(jobs_list)} binaries (FMI 2.0 and 3.0 for "
+        f"{', '.join(t.zig for t in targets)}), {max(1, jobs)} at a time")
+
+    def compile_one(job):  # each binary says what it was when it is there: a cold zig cache takes minutes
+        from time import time as wall_clock  # here: only the build's lines need it
+
+        version, target = job
+        began = wall_clock()
+        binary = _compile(model, header_dir, version, target, zig_version)
+        how = f"compiled in {wall_clock() - began:.1f} s" if binary.stat().st_mtime >= began - 1 else "from the cache"
+        say(f"{model.model_identifier} FMI {version}.0 {target.zig}: {how}")
+        return binary
+
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        binaries = dict(zip(jobs_list, pool.map(
-            lambda job: _compile(model, header_dir, job[0], job[1], zig_version), jobs_list)))
+        binaries = dict(zip(jobs_list, pool.map(compile_one, jobs_list)))
     name = model.model_identifier
     sources = {f"sources/{p.name}": p.read_bytes() for p in (*LAYER, *model.c_sources, *model.c_headers, header)}
     files2 = {"modelDescription.xml": _pretty(description2), **sources}
@@ -626,6 +639,8 @@ def ensure_built(platforms=None, force: bool = False, verbose: bool = False, job
             zig_version = zig_version or c_toolchain.zig_version()
             build_model(model, platforms, jobs=jobs, zig_version=zig_version, verbose=verbose)
             _atomic_write(stamp_file, stamp.encode())
+        elif verbose:
+            print(f"native: {model.model_identifier}: up to date", file=sys.stderr, flush=True)
         result[model.model_identifier] = paths
     return result
 
