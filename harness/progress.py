@@ -26,6 +26,9 @@ PROGRESS_LINE_EVERY_S = 5.0
 PROGRESS_HEARTBEAT_S = 30.0
 #: how often the clock thread looks (and redraws the bar)
 CLOCK_TICK_S = 1.0
+#: no time left is shown before this share of the work is done: until then the workers' start
+#: (spawning, importing, extracting the FMUs) weighs on the rate more than the work does
+ESTIMATE_FROM_SHARE = 0.01
 
 
 # ------------------------------------------------------------------ the estimate
@@ -196,6 +199,8 @@ class Progress:
         """The estimate the lines and the bar show (time_left_s)."""
         elapsed = clock.perf_counter() - self.started
         if self.board is not None:
+            if self.board.done() < ESTIMATE_FROM_SHARE * self.board.total:
+                return None
             return self.board.time_left_s(elapsed, self.workers)
         return time_left_s([1.0] * self.total, [1.0] * min(self.done, self.total) +
                            [0.0] * max(0, self.total - self.done), elapsed, self.workers)
@@ -245,4 +250,4 @@ class Progress:
 
 
 __all__ = ["Progress", "WorkBoard", "time_left_s", "attach", "set_item", "step_reporter", "PROGRESS_LINE_EVERY_S",
-           "PROGRESS_HEARTBEAT_S", "CLOCK_TICK_S"]
+           "PROGRESS_HEARTBEAT_S", "CLOCK_TICK_S", "ESTIMATE_FROM_SHARE"]

@@ -16,6 +16,8 @@ import os
 import signal
 import time as clock
 
+from .fmi import release_extractions
+
 #: seconds a stopped worker has to unwind before SIGKILL
 END_GRACE_S = 5.0
 
@@ -72,8 +74,6 @@ def exit_if_stopped() -> None:
     """After an item: a worker SIGTERM reached ends now, its extracted FMUs removed, even if the item
     swallowed the exception (the pool would give it the next item otherwise)."""
     if _STOPPING:
-        from .fmi import release_extractions  # here: only a stopping worker needs it
-
         release_extractions()
         os._exit(128 + signal.SIGTERM)
 

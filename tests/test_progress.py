@@ -75,6 +75,16 @@ def test_the_lines_show_the_share_of_the_steps_and_the_time_left_from_the_board(
     first = stream.getvalue().splitlines()[0]
     assert re.fullmatch(r"tables: 1/2 runs done in \d+ s \(70 % of the steps\), about \d+ s left \(last: short\)",
                         first), first
+    stream = io.StringIO()
+    board = WorkBoard([1000, 1000], unit="step")
+    with Progress(2, "tables", stream=stream, board=board, workers=2) as bar:
+        board.fractions[0] = 0.015  # under ESTIMATE_FROM_SHARE of the work: the start dominates, no estimate
+        bar._line(bar._status())
+        board.fractions[0] = 0.025
+        bar._line(bar._status())
+    early, later = stream.getvalue().splitlines()[:2]
+    assert early.endswith("(1 % of the steps)") and "left" not in early, early
+    assert later.endswith("s left"), later
 
 
 def test_step_reporter_writes_the_items_fraction_and_is_none_without_a_board():

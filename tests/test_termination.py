@@ -31,6 +31,26 @@ def descendants_until(process: subprocess.Popen, count: int, timeout_s: float, n
     pytest.fail(f"fewer than {count} {name or 'processes'} under the command within {timeout_s} s")
 
 
+def with_ctrl_c():
+    """A child that takes Ctrl-C as a terminal's does, even when this process was started ignoring it."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def end_tree(command: subprocess.Popen) -> None:
+    """A failing test leaves no process behind: the command and everything under it."""
+    try:
+        below = psutil.Process(command.pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        below = []
+    if command.poll() is None:
+        command.kill()
+    for process in below:
+        try:
+            process.kill()
+        except psutil.NoSuchProcess:
+            pass
+
+
 def alive(processes) -> list:
     left = []
     for process in processes:
@@ -65,15 +85,18 @@ POOL_SCRIPT = textwrap.dedent("""
 
 @pytest.mark.parametrize("stop_signal, status", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_a_signal_ends_the_pools_workers_and_what_they_started(stop_signal, status):
-    command = subprocess.Popen([sys.executable, "-c", POOL_SCRIPT], cwd=ROOT, stdin=subprocess.DEVNULL)
+    command = subprocess.Popen([sys.executable, "-c", POOL_SCRIPT], cwd=ROOT, stdin=subprocess.DEVNULL,
+                               preexec_fn=with_ctrl_c)
+    below = []
     try:
         below = descendants_until(command, 2, 60.0, name="sleep")  # both workers in their item's subprocess
         command.send_signal(stop_signal)
         assert command.wait(30) == status
         assert gone_within(below, 10.0) == []  # no worker, no worker's subprocess left
     finally:
-        if command.poll() is None:
-            command.kill()
+        end_tree(command)
+        for process in alive(below):
+            process.kill()
 
 
 def busy_loop() -> subprocess.Popen:
@@ -89,7 +112,7 @@ def test_tables_under_a_pipe_on_a_loaded_cpu_says_how_far_within_10_s_and_sigter
         began = time.monotonic()
         command = subprocess.Popen([sys.executable, "-m", "harness", "tables", "--stop", "4", "--jobs", "2",
                                     "--out", str(tmp_path / "results")], cwd=ROOT, stdin=subprocess.DEVNULL,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=with_ctrl_c)
         try:
             selector = selectors.DefaultSelector()
             selector.register(command.stderr, selectors.EVENT_READ)
@@ -109,8 +132,7 @@ def test_tables_under_a_pipe_on_a_loaded_cpu_says_how_far_within_10_s_and_sigter
             assert gone_within(workers, 10.0) == []
             assert b"error: terminated (SIGTERM)" in command.stderr.read()
         finally:
-            if command.poll() is None:
-                command.kill()
+            end_tree(command)
     finally:
         load.kill()
         load.wait()
