@@ -570,7 +570,12 @@ def build_model(model: FmuSource, platforms=PLATFORMS, jobs: int = 2, zig_versio
         _atomic_write(header, text.encode())
     targets = _selected(platforms)
     jobs_list = [(version, target) for version in (2, 3) for target in targets]
-    say = (lambda text: print(f"native: {text}", file=sys.stderr, flush=True)) if verbose else (lambda text: None)
+
+    def say(text):  # one write per line: the compiling threads' lines never run into each other
+        if verbose:
+            sys.stderr.write(f"native: {text}\n")
+            sys.stderr.flush()
+
     say(f"{model.model_identifier}: {len(jobs_list)} binaries (FMI 2.0 and 3.0 for "
         f"{', '.join(t.zig for t in targets)}), {max(1, jobs)} at a time")
 

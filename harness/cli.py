@@ -14,7 +14,7 @@ import sys
 import fmu_catalog
 from c_toolchain import NativeBuildError
 
-from . import cli_args, termination, variants
+from . import cli_args, progress, termination, variants
 from . import scenario as scenarios
 from .cases import Progress
 from .hosts import bench, engines, matrix, ssp
@@ -182,6 +182,8 @@ def main(argv=None) -> int:
     except SystemExit as done:  # a usage error (one line already printed) or --help
         return done.code if isinstance(done.code, int) else cli_args.USAGE_EXIT
     undo = apply_edition(args)
+    # the command line's own process counts its first progress line from its start; a call from Python from now
+    progress.command_began(progress.process_started() if argv is None else None)
     try:
         if args.command in SSP_ENGINE_COMMANDS and os.environ.get(fmu_catalog.EDITION_VARIABLE) == "native3":
             print(f"error: {fmu_catalog.EDITION_VARIABLE}=native3: {args.command} hands the FMUs to SSP engines, "
@@ -197,4 +199,5 @@ def main(argv=None) -> int:
         status = cli_args.report(error)
         return cli_args.USAGE_EXIT if isinstance(error, NativeBuildError) else status
     finally:
+        progress.command_ended()
         undo()

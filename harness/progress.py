@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import heapq
 import multiprocessing
+import os
 import sys
+from pathlib import Path
 import threading
 import time as clock
 
@@ -29,6 +31,34 @@ CLOCK_TICK_S = 1.0
 #: no time left is shown before this share of the work is done: until then the workers' start
 #: (spawning, importing, extracting the FMUs) weighs on the rate more than the work does
 ESTIMATE_FROM_SHARE = 0.01
+
+
+# ------------------------------------------------------------------ the command's clock
+_COMMAND_STARTED = None  # perf_counter() time the running command began (command_began), if one runs
+
+
+def process_started() -> float:
+    """The perf_counter() time this process began (Linux: from /proc); now where that cannot be read."""
+    now = clock.perf_counter()
+    try:
+        ticks = int(Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()[19])
+        uptime = float(Path("/proc/uptime").read_text().split()[0])
+        return now - max(0.0, uptime - ticks / os.sysconf("SC_CLK_TCK"))
+    except (OSError, ValueError, IndexError):
+        return now
+
+
+def command_began(at: float | None = None) -> None:
+    """The first line's clock counts from ``at`` (a perf_counter() time; default now) until command_ended:
+    a command that took long to reach its runs says how far it is PROGRESS_LINE_EVERY_S after it began."""
+    global _COMMAND_STARTED
+    _COMMAND_STARTED = clock.perf_counter() if at is None else at
+
+
+def command_ended() -> None:
+    """From now on each display's first line counts from the display's own start."""
+    global _COMMAND_STARTED
+    _COMMAND_STARTED = None
 
 
 # ------------------------------------------------------------------ the estimate
@@ -123,7 +153,8 @@ def step_reporter():
 class Progress:
     """How a long command says how far it is, on stderr: tqdm's bar on a terminal, redrawn every
     CLOCK_TICK_S; elsewhere plain lines: none for a command done within PROGRESS_LINE_EVERY_S (a short
-    run stays quiet, its error alone on stderr), then one at PROGRESS_LINE_EVERY_S of wall time, one per
+    run stays quiet, its error alone on stderr), then one at PROGRESS_LINE_EVERY_S of wall time after the
+    command began (command_began; else after this display began), one per
     finished item at most every PROGRESS_LINE_EVERY_S, one every PROGRESS_HEARTBEAT_S while nothing
     finishes, and one at the end.  ``board``: a :class:`WorkBoard` of the items (their share of the work
     done and the time left come from it); ``workers``: the processes working on them.
@@ -137,6 +168,8 @@ class Progress:
         self.board, self.workers = board, max(1, workers)
         self.done, self.label, self.printed = initial, "", False
         self.started = self.last_line = clock.perf_counter()
+        began = _COMMAND_STARTED
+        self.first_line_from = began if began is not None and began <= self.started else self.started
         self.finished_since_line = False
         terminal = self.stream.isatty() if bar is None else bar
         self.mode = "off" if not enabled else "bar" if terminal else "lines"
@@ -223,7 +256,7 @@ class Progress:
                     if self._bar is not None:
                         self._redraw()
                         continue
-                    since_start = clock.perf_counter() - self.started
+                    since_start = clock.perf_counter() - self.first_line_from
                     since_line = clock.perf_counter() - self.last_line
                     if not self.printed and since_start >= PROGRESS_LINE_EVERY_S:
                         self._line(self._status())
@@ -250,4 +283,5 @@ class Progress:
 
 
 __all__ = ["Progress", "WorkBoard", "time_left_s", "attach", "set_item", "step_reporter", "PROGRESS_LINE_EVERY_S",
-           "PROGRESS_HEARTBEAT_S", "CLOCK_TICK_S", "ESTIMATE_FROM_SHARE"]
+           "PROGRESS_HEARTBEAT_S", "CLOCK_TICK_S", "ESTIMATE_FROM_SHARE", "command_began", "command_ended",
+           "process_started"]

@@ -158,3 +158,23 @@ def test_the_native_build_says_each_binary_as_it_is_there(monkeypatch, tmp_path,
     assert len(compiled) == 2
     build_native.build_model(model, platforms=("linux64",), jobs=1, zig_version="0", verbose=False)
     assert capsys.readouterr().err == ""  # quiet unless asked (the harness's own builds)
+
+
+def test_a_command_slow_to_reach_its_runs_says_how_far_at_the_first_tick(monkeypatch):
+    monkeypatch.setattr(progress_module, "CLOCK_TICK_S", 0.1)
+    stream = io.StringIO()
+    with Progress(5, "tables", stream=stream):  # a display of its own: its first line after 5 s
+        time.sleep(0.5)
+    assert stream.getvalue() == ""
+    progress_module.command_began(time.perf_counter() - progress_module.PROGRESS_LINE_EVERY_S)  # imports, builds...
+    try:
+        with Progress(5, "tables", stream=stream):
+            time.sleep(0.5)
+            lines = stream.getvalue().splitlines()
+    finally:
+        progress_module.command_ended()
+    assert len(lines) == 1 and lines[0].startswith("tables: 0/5 runs done in 0 s"), lines
+
+
+def test_the_process_began_before_now():
+    assert 0.0 <= time.perf_counter() - progress_module.process_started() < 3600
