@@ -7,9 +7,9 @@ takes and however loaded the machine is.
 
 The time left comes from the work done, not from the items finished: a :class:`WorkBoard` holds each
 item's weight (a co-simulation's communication steps) and the fraction of it done, in memory the pool's
-workers share; a worker writes its item's fraction through :func:`step_reporter` every few hundred steps
-(the master's progress callback, off the per-step path), and :func:`time_left_s` turns weights,
-fractions and the elapsed time into seconds left.
+workers share; a worker writes its item's fraction through :func:`step_reporter` about 200 times a run
+(the master's progress callback, between blocks of steps, off the per-step path), and
+:func:`time_left_s` turns weights, fractions and the elapsed time into seconds left.
 """
 from __future__ import annotations
 
