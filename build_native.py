@@ -43,6 +43,7 @@ import argparse
 import hashlib
 import os
 import sys
+import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -91,9 +92,25 @@ def build_model(model: FmuSource, platforms=PLATFORMS, jobs: int = 2, zig_versio
         atomic_write(header, text.encode())
     targets = selected_targets(platforms)
     jobs_list = [(version, target) for version in (2, 3) for target in targets]
+
+    def say(text):  # one write per line: the compiling threads' lines never run into each other
+        if verbose:
+            sys.stderr.write(f"native: {text}\n")
+            sys.stderr.flush()
+
+    say(f"{model.model_identifier}: {len(jobs_list)} binaries (FMI 2.0 and 3.0 for "
+        f"{', '.join(t.zig for t in targets)}), {max(1, jobs)} at a time")
+
+    def compile_one(job):  # each binary says what it was when it is there: a cold zig cache takes minutes
+        version, target = job
+        began = time.time()
+        binary = compile_binary(model, header_dir, version, target, zig_version)
+        how = f"compiled in {time.time() - began:.1f} s" if binary.stat().st_mtime >= began - 1 else "from the cache"
+        say(f"{model.model_identifier} FMI {version}.0 {target.zig}: {how}")
+        return binary
+
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        binaries = dict(zip(jobs_list, pool.map(
-            lambda job: compile_binary(model, header_dir, job[0], job[1], zig_version), jobs_list)))
+        binaries = dict(zip(jobs_list, pool.map(compile_one, jobs_list)))
     files = fmu_files(model, {2: pretty_xml(description2), 3: pretty_xml(description3)}, header, binaries, targets,
                       source_files(model))
     paths = fmu_paths()[model.model_identifier]
@@ -139,6 +156,8 @@ def ensure_built(platforms=None, force: bool = False, verbose: bool = False, job
             zig_version = zig_version or c_toolchain.zig_version()
             build_model(model, platforms, jobs=jobs, zig_version=zig_version, verbose=verbose)
             atomic_write(stamp_file, stamp.encode())
+        elif verbose:
+            print(f"native: {model.model_identifier}: up to date", file=sys.stderr, flush=True)
         result[model.model_identifier] = paths
     return result
 

@@ -19,8 +19,6 @@ from __future__ import annotations
 import functools
 import multiprocessing
 import os
-import sys
-import threading
 import time as clock
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
@@ -30,11 +28,13 @@ import numpy as np
 
 import build_fmu
 
-from . import master_loop, me_loop, me_master
+from . import master_loop, me_loop, me_master, termination
+from . import progress as progress_module
 from . import scenario as scenarios
 from .fmi import FmiError
 from .master import ALGORITHMS as CO_SIMULATION_ALGORITHMS
 from .master import Divergence, SimulationFailed, simulate
+from .progress import Progress, WorkBoard
 from .scores import score_run
 
 #: every algorithm a run can use: our co-simulation masters and Model Exchange (harness/me_master.py)
@@ -151,7 +151,8 @@ def run_case(case: Case, fmu_paths: dict | None = None) -> dict:
     wall = clock.perf_counter()
     result = None
     try:
-        result = simulate_any(scenario, case.algorithm, fmu_paths, rtol=case.rtol, atol=case.atol)
+        result = simulate_any(scenario, case.algorithm, fmu_paths, progress=progress_module.step_reporter(),
+                              rtol=case.rtol, atol=case.atol)
         outcome.update(status="ok", reason="", **score_run(result), us_per_step=result.us_per_step)
     except Exception as error:  # noqa: BLE001 - every failure of a case is an outcome, the study goes on
         if isinstance(error, SimulationFailed):
@@ -185,136 +186,82 @@ def default_jobs() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-#: without a terminal (CI logs, ``| tee``, ``| cat``): nothing for a command shorter than this, then at
-#: most one line per finished item this often ...
-PROGRESS_LINE_EVERY_S = 5.0
-#: ... and one this often while nothing finishes, so a long run never looks hung
-PROGRESS_HEARTBEAT_S = 30.0
+def _run_item(function, index: int, item):
+    """One item in a worker: its progress goes to its slot of the board; a SIGTERM ends the worker after it."""
+    progress_module.set_item(index)
+    try:
+        return function(item)
+    finally:
+        progress_module.set_item(None)
+        termination.exit_if_stopped()
 
 
-class Progress:
-    """How a long command says how far it is, on stderr: tqdm's bar on a terminal; elsewhere, where no
-    bar can be drawn, plain lines: none for a command done within PROGRESS_LINE_EVERY_S (a short
-    run stays quiet, its error alone on stderr), then one per finished item at most every
-    PROGRESS_LINE_EVERY_S, one every PROGRESS_HEARTBEAT_S while nothing finishes, and one at the end.
-    ``enabled=False``: silent.  ``bar``: force the bar (True) or the lines (False)."""
-
-    def __init__(self, total: int, description: str, unit: str = "run", enabled: bool = True, initial: int = 0,
-                 stream=None, bar: bool | None = None, **tqdm_options):
-        self.stream = stream or sys.stderr
-        self.total, self.description, self.unit = total, description, unit
-        self.done, self.label, self.printed = initial, "", False
-        self.started = self.last_line = clock.perf_counter()
-        terminal = self.stream.isatty() if bar is None else bar
-        self.mode = "off" if not enabled else "bar" if terminal else "lines"
-        self._lock = threading.Lock()
-        self._stopped = threading.Event()
-        self._bar = self._heartbeat = None
-        if self.mode == "bar":
-            from tqdm import tqdm  # here, not at module level: an import a CLI start without a study skips
-
-            self._bar = tqdm(total=total, initial=initial, desc=description, unit=unit, file=self.stream,
-                             **tqdm_options)
-        elif self.mode == "lines":
-            self._heartbeat = threading.Thread(target=self._beat, daemon=True)
-            self._heartbeat.start()
-
-    def update(self, count: int = 1, label: str = "") -> None:
-        """``count`` more items finished (the last one: ``label``)."""
-        with self._lock:
-            self.done += count
-            self.label = label or self.label
-        if self._bar is not None:
-            self._bar.update(count)
-        elif self.mode == "lines" and self.done < self.total and \
-                clock.perf_counter() - self.last_line >= PROGRESS_LINE_EVERY_S:
-            self._line(self._status())
-
-    def set_postfix(self, **values) -> None:
-        if self._bar is not None:
-            self._bar.set_postfix(**values)
-        else:
-            self.label = ", ".join(f"{key} {value}" for key, value in values.items())
-
-    def close(self) -> None:
-        """Stop (and say where it ended, if it said anything); closing twice is harmless."""
-        if self._bar is not None:
-            self._bar.close()
-        elif self.mode == "lines" and not self._stopped.is_set():
-            self._stopped.set()
-            self._heartbeat.join()
-            if self.printed:
-                self._line(self._status(final=True))
-        self._stopped.set()
-
-    def _status(self, final: bool = False) -> str:
-        elapsed = clock.perf_counter() - self.started
-        text = f"{self.done}/{self.total} {self.unit}s done in {elapsed:.0f} s"
-        if not final and 0 < self.done < self.total:
-            text += f", about {elapsed / self.done * (self.total - self.done):.0f} s left"
-        return text + (f" (last: {self.label})" if self.label and not final else "")
-
-    def _beat(self):
-        while not self._stopped.wait(min(PROGRESS_HEARTBEAT_S, 1.0)):
-            if clock.perf_counter() - self.last_line >= PROGRESS_HEARTBEAT_S:
-                try:
-                    self._line(self._status() + ", still running")
-                except (ValueError, OSError):  # the stream was closed under us: nothing more to say
-                    return
-
-    def _line(self, text: str):
-        with self._lock:
-            print(f"{self.description}: {text}", file=self.stream, flush=True)
-            self.last_line, self.printed = clock.perf_counter(), True
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+def _start_worker(fractions):
+    termination.worker_signals()
+    progress_module.attach(fractions)
 
 
 def parallel_map(function, items: list, jobs: int | None = None, description: str = "",
-                 progress: bool | None = False, label=None) -> list:
+                 progress: bool | None = False, label=None, weights=None, unit: str = "") -> list:
     """[function(item) for item in items] on ``jobs`` processes (default every core), in order.
 
     Workers are spawned, clean interpreters: loaded FMUs (and Ecos's threads) never cross a
     fork.  ``function`` must be picklable (a module-level function or a functools.partial).
     ``progress`` (None or True: on; False: off) is a :class:`Progress` on stderr: a bar on a
-    terminal, lines elsewhere; ``label(item)`` names a finished item in those lines.
+    terminal, lines elsewhere; ``label(item)`` names a finished item in those lines.  ``weights``:
+    each item's work in ``unit`` (a co-simulation's steps; default 1 per item), which the time left is
+    estimated from, with the fractions ``function`` reports through harness.progress.step_reporter.
+    A KeyboardInterrupt (Ctrl-C, or SIGTERM as harness.termination.Terminated) ends the workers.
     """
     jobs = max(1, min(len(items), jobs or default_jobs()))
     results = [None] * len(items)
     name = label or (lambda item: "")
-    with Progress(len(items), description or "runs", enabled=progress is not False) as bar:
+    board = WorkBoard(weights if weights is not None else [1] * len(items), unit if weights is not None else "")
+    with Progress(len(items), description or "runs", enabled=progress is not False, board=board,
+                  workers=jobs) as bar:
         if jobs == 1:
-            for index, item in enumerate(items):
-                results[index] = function(item)
-                bar.update(label=name(item))
+            outer = progress_module.attach(board.fractions), progress_module.set_item(None)
+            try:
+                for index, item in enumerate(items):
+                    progress_module.set_item(index)
+                    results[index] = function(item)
+                    board.finish(index)
+                    bar.update(label=name(item))
+            finally:
+                progress_module.attach(outer[0])
+                progress_module.set_item(outer[1])
             return results
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = {pool.submit(function, item): index for index, item in enumerate(items)}
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_start_worker, initargs=(board.fractions,))
+        try:
+            futures = {pool.submit(_run_item, function, index, item): index for index, item in enumerate(items)}
             pending = set(futures)
             while pending:
                 finished, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for future in finished:
-                    results[futures[future]] = future.result()
-                    bar.update(label=name(items[futures[future]]))
+                    index = futures[future]
+                    results[index] = future.result()
+                    board.finish(index)
+                    bar.update(label=name(items[index]))
+        except BaseException:
+            termination.end_workers(pool)
+            raise
+        pool.shutdown(wait=True)
     return results
 
 
 def run_cases(cases: list, jobs: int | None = None, description: str = "co-simulations",
               progress: bool | None = None, fmu_paths: dict | None = None) -> list:
     """Outcomes of ``cases`` in their order, computed on ``jobs`` processes with one progress bar."""
-    for case in cases:  # a mistake in a case (a stop off the step grid, ...) is one error before any run
-        case.build()
+    # a mistake in a case (a stop off the step grid, ...) is one error before any run; each run's steps weigh it
+    steps = [max(1, case.build().steps) for case in cases]
     if fmu_paths is None:
         fmu_paths = build_fmu.ensure_built()  # once, before the workers start
     master_loop.library()  # the compiled loop too (when zig is installed), so no two workers compile it
     if any(case.algorithm == me_master.ALGORITHM for case in cases):
         me_loop.library()
     return parallel_map(functools.partial(run_case, fmu_paths=fmu_paths), cases, jobs, description, progress,
-                        label=lambda case: case.label)
+                        label=lambda case: case.label, weights=steps, unit="step")
 
 
 __all__ = ["Case", "Progress", "run_case", "run_cases", "simulate_any", "ALGORITHMS", "parallel_map", "default_jobs",

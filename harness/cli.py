@@ -14,7 +14,7 @@ import sys
 import fmu_catalog
 from c_toolchain import NativeBuildError
 
-from . import cli_args, variants
+from . import cli_args, progress, termination, variants
 from . import scenario as scenarios
 from .cases import Progress
 from .hosts import bench, engines, matrix, ssp
@@ -27,7 +27,7 @@ from .studies import compat, me_accuracy, mutation, regression, step_study, swee
 
 
 def _progress(total: int, description: str, enabled: bool):
-    """(callback for the master, close): a bar on a terminal, lines on stderr elsewhere (cases.Progress)."""
+    """(callback for the master, close): a bar on a terminal, lines on stderr elsewhere (harness.progress.Progress)."""
     if not enabled:
         return None, lambda: None
     bar = Progress(total, description, unit="step", unit_scale=True, leave=False)
@@ -174,24 +174,30 @@ def apply_edition(args):
 
 
 def main(argv=None) -> int:
-    """Run one subcommand; any error becomes one line on stderr (exit 2: usage, 1: the run failed)."""
+    """Run one subcommand; any error becomes one line on stderr (exit 2: usage, 1: the run failed, 130: Ctrl-C,
+    143: SIGTERM)."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as done:  # a usage error (one line already printed) or --help
         return done.code if isinstance(done.code, int) else cli_args.USAGE_EXIT
     undo = apply_edition(args)
+    # the command line's own process counts its first progress line from its start; a call from Python from now
+    progress.command_began(progress.process_started() if argv is None else None)
     try:
         if args.command in SSP_ENGINE_COMMANDS and os.environ.get(fmu_catalog.EDITION_VARIABLE) == "native3":
             print(f"error: {fmu_catalog.EDITION_VARIABLE}=native3: {args.command} hands the FMUs to SSP engines, "
                   "which take FMI 2.0 FMUs; use --edition native", file=sys.stderr)
             return cli_args.USAGE_EXIT
-        return args.handler(args)
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
+        with termination.sigterm_as_interrupt():  # SIGTERM stops a command as Ctrl-C does, workers and all
+            return args.handler(args)
+    except KeyboardInterrupt as interrupt:  # Ctrl-C, or SIGTERM (termination.Terminated)
+        print("error: terminated (SIGTERM)" if isinstance(interrupt, termination.Terminated) else "error: interrupted",
+              file=sys.stderr)
+        return termination.exit_status(interrupt)
     except Exception as error:  # noqa: BLE001 - the last resort: no traceback reaches a user
         status = cli_args.report(error)
         return cli_args.USAGE_EXIT if isinstance(error, NativeBuildError) else status
     finally:
+        progress.command_ended()
         undo()

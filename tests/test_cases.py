@@ -1,4 +1,4 @@
-"""harness/cases.py: progress of long commands where no bar can be drawn.
+"""harness/progress.py through harness/cases.py: progress of long commands where no bar can be drawn.
 
 `tables` printed nothing for 4 minutes under `| cat` or in a CI log: tqdm's bar is drawn only on a
 terminal.  Elsewhere a long command now prints lines to stderr: none if it is done within
@@ -13,6 +13,7 @@ import re
 import time
 
 from harness import cases
+from harness import progress as progress_module
 
 
 class Terminal(io.StringIO):
@@ -21,9 +22,9 @@ class Terminal(io.StringIO):
 
 
 def test_without_a_terminal_progress_is_lines_per_item_and_at_the_end(monkeypatch):
-    monkeypatch.setattr(cases, "PROGRESS_LINE_EVERY_S", 0.0)
+    monkeypatch.setattr(progress_module, "PROGRESS_LINE_EVERY_S", 0.0)
     stream = io.StringIO()
-    with cases.Progress(3, "Table I/II", stream=stream) as progress:
+    with progress_module.Progress(3, "Table I/II", stream=stream) as progress:
         for name in ("pendulum_case1_vud", "manipulator_fae", "motor_arm_fixed"):
             progress.update(label=name)
     lines = stream.getvalue().splitlines()
@@ -33,15 +34,15 @@ def test_without_a_terminal_progress_is_lines_per_item_and_at_the_end(monkeypatc
 
 
 def test_lines_are_rate_limited_and_a_heartbeat_says_a_long_wait_is_not_a_hang(monkeypatch):
-    monkeypatch.setattr(cases, "PROGRESS_LINE_EVERY_S", 3600.0)
+    monkeypatch.setattr(progress_module, "PROGRESS_LINE_EVERY_S", 3600.0)
     stream = io.StringIO()
-    with cases.Progress(1000, "sweep", unit="pt", stream=stream) as progress:
+    with progress_module.Progress(1000, "sweep", unit="pt", stream=stream) as progress:
         for _ in range(999):
             progress.update()
     assert stream.getvalue() == ""  # a command done within PROGRESS_LINE_EVERY_S stays quiet: no flood, no noise
-    monkeypatch.setattr(cases, "PROGRESS_HEARTBEAT_S", 0.2)
+    monkeypatch.setattr(progress_module, "PROGRESS_HEARTBEAT_S", 0.2)
     stream = io.StringIO()
-    with cases.Progress(2, "hosts", stream=stream):
+    with progress_module.Progress(2, "hosts", stream=stream):
         time.sleep(1.5)
     beats = [line for line in stream.getvalue().splitlines() if line.endswith(", still running")]
     assert beats and beats[0].startswith("hosts: 0/2 runs done in "), stream.getvalue()
@@ -49,17 +50,17 @@ def test_lines_are_rate_limited_and_a_heartbeat_says_a_long_wait_is_not_a_hang(m
 
 def test_on_a_terminal_the_bar_and_when_disabled_nothing():
     terminal = Terminal()
-    with cases.Progress(2, "run", stream=terminal) as progress:
+    with progress_module.Progress(2, "run", stream=terminal) as progress:
         progress.update(2)
     assert progress.mode == "bar" and "2/2" in terminal.getvalue() and "runs done" not in terminal.getvalue()
     quiet = io.StringIO()
-    with cases.Progress(2, "run", stream=quiet, enabled=False) as progress:
+    with progress_module.Progress(2, "run", stream=quiet, enabled=False) as progress:
         progress.update(2)
     assert quiet.getvalue() == ""
 
 
 def test_parallel_map_reports_progress_by_item_when_stderr_is_not_a_terminal(monkeypatch, capsys):
-    monkeypatch.setattr(cases, "PROGRESS_LINE_EVERY_S", 0.0)
+    monkeypatch.setattr(progress_module, "PROGRESS_LINE_EVERY_S", 0.0)
     assert cases.parallel_map(abs, [-1, -2, -3], jobs=1, description="demo", progress=None,
                               label=lambda item: f"item {item}") == [1, 2, 3]
     err = capsys.readouterr().err

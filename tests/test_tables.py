@@ -8,7 +8,7 @@ import pytest
 
 import build_native
 
-from harness import cases
+from harness import cases, progress
 from harness.cli import main as cli_main
 from harness.studies import tables
 
@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402 - after choosing the backend
 
 
 def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(cases, "PROGRESS_LINE_EVERY_S", 0.0)  # a line per finished run even on a fast machine
+    monkeypatch.setattr(progress, "PROGRESS_LINE_EVERY_S", 0.0)  # a line per finished run even on a fast machine
     code = cli_main(["tables", "--out", str(tmp_path), "--stop", "0.3", "--jobs", "2", "--refine", "0"])
     captured = capsys.readouterr()
     out = captured.out

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import build_fmu
 
-from .. import cli_args, variants
+from .. import cli_args, termination, variants
 from ..cases import STATUSES, Progress, one_line
 from ..scenario import ScenarioError
 from ..scores import SCORE_KEYS, undefined_reason
@@ -63,6 +63,7 @@ class SweepSummary:
     executor: str
     lost: int = 0  # points whose worker was lost (crash, killed worker): not recorded, rerun on resume
     lost_reason: str = ""
+    interrupt_status: int = 0  # interrupted: 130 (Ctrl-C) or 143 (SIGTERM), harness/termination.py
 
 
 def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | None = None,
@@ -89,7 +90,7 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
                                          "controllers": list(plan.controllers), "metric": plan.metric}, indent=2))
     sink = CsvSink(csv_path, plan.names, kept)
     wall_start = clock.perf_counter()
-    interrupted, computed, pool, lost, lost_reason = False, 0, None, 0, ""
+    interrupted, computed, pool, lost, lost_reason, interrupt_status = False, 0, None, 0, "", 0
     if todo:
         try:
             pool = (DaskPool(scheduler, plan) if scheduler else
@@ -117,8 +118,8 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
                     bar.set_postfix(not_ok=troubled, lost=lost)
                 if on_row is not None:
                     on_row(row, computed)
-    except KeyboardInterrupt:
-        interrupted = True
+    except KeyboardInterrupt as interrupt:
+        interrupted, interrupt_status = True, termination.exit_status(interrupt)
     finally:
         if previous_sigterm is not None:
             signal.signal(signal.SIGTERM, previous_sigterm)
@@ -135,13 +136,14 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
     if plot and rows:
         heatmap_path = plot_heatmap(plan, rows, out / f"heatmap_{plan.metric}.png")
     return SweepSummary(csv_path, heatmap_path, len(wanted), done_before, computed, counts, wall_s,
-                        interrupted, pool.describe() if pool else "nothing to run", lost, lost_reason)
+                        interrupted, pool.describe() if pool else "nothing to run", lost, lost_reason,
+                        interrupt_status)
 
 
 def _sigterm_as_interrupt():
     """SIGTERM stops the sweep as Ctrl-C does (the previous handler, or None off the main thread)."""
     def handler(signum, frame):
-        raise KeyboardInterrupt
+        raise termination.Terminated()
 
     try:
         return signal.signal(signal.SIGTERM, handler)
@@ -204,7 +206,7 @@ def sweep_command(args) -> int:
     if args.apply and not (summary.interrupted or summary.lost):
         for path in apply_to_docs(plan, summary):
             print(f"  applied  {path}")
-    return 130 if summary.interrupted else 1 if summary.lost else 0
+    return summary.interrupt_status if summary.interrupted else 1 if summary.lost else 0
 
 
 def plan_fmu_paths(plan: SweepPlan) -> dict:
