@@ -272,7 +272,6 @@ class ModelExchangeMaster(Master):
         self._plan = plan
         rows = len(record)
         step_events = any(c.info.needs_completed_integrator_step for c in self.components.values())
-        solver = self.solver
         next_time = math.inf if next_time is None else next_time
         target = self._target(next_time, stop)
         row = 1

@@ -28,7 +28,6 @@ import dataclasses
 import importlib.metadata
 import json
 import math
-import os
 import shutil
 import subprocess
 import sys

@@ -28,7 +28,7 @@ from ..me_master import DEFAULT_RTOL
 from ..scores import DEFINITIONS, SCORE_KEYS, SETTLING_BAND, undefined_reason, value_text, why_none
 from ..units import score_units, variable_unit, with_unit
 from . import claims as claims_module
-from .step_study import _fmt, convergence_summary, load_convergence, validated_step
+from .step_study import convergence_summary, load_convergence, validated_step
 
 ROOT = Path(__file__).resolve().parents[2]
 CONTROLLERS = variants.PAPER  # the paper's comparison: vud, fixed, fae
