@@ -4,9 +4,9 @@
     python build_fmu.py --force    # rebuild all
     python build_fmu.py --docs     # also rewrite the generated tables of docs/ (FMU variables, scenario keys)
 
-Each FMU is one script (unique file name: pythonfmu loads all FMUs into one
-interpreter) plus its project files.  A build is stale when any source is
-newer than the FMU.
+Each FMU is one script plus its project files, staged under top-level names
+unique across the FMUs (fmu_staging.py: pythonfmu loads all FMUs into one
+interpreter).  A build is stale when any source is newer than the FMU.
 """
 from __future__ import annotations
 
@@ -19,7 +19,9 @@ import tempfile
 from pathlib import Path
 
 import build_native
+from native_build import ls_ref
 from fmu_catalog import FMUS, FmuSource, model_class, ordinary_file_mode, selected_edition
+from fmu_staging import stage
 from harness.scenario import keys_markdown
 
 ROOT = Path(__file__).resolve().parent
@@ -29,16 +31,17 @@ def is_stale(fmu: FmuSource) -> bool:
     if not fmu.fmu_path.exists():
         return True
     built = fmu.fmu_path.stat().st_mtime
-    return any(source.stat().st_mtime > built for source in fmu.sources)
+    return any(source.stat().st_mtime > built for source in (*fmu.sources, *ls_ref.EXPERIMENTS.glob("*")))
 
 
-def build_script(script: Path, fmu_path: Path, project_files) -> Path:
+def build_script(script: Path, fmu_path: Path, project_files, ls_ref_model: str | None = None) -> Path:
     """Build one FMU with pythonfmu's builder in a fresh interpreter.
 
     A fresh process because a process that has loaded one of our FMUs may
     import ``pythonfmu`` from that FMU's resources (which hold no binaries).
-    The folders of the project files go on PYTHONPATH, so the script's own
-    imports resolve while the builder reads its model description.
+    The script and its project files are staged under their names inside the
+    FMU (fmu_staging.py), so the script's own imports resolve while the builder
+    reads its model description.
 
     The builder writes a temporary file in the same folder, which then replaces
     ``fmu_path`` in one step (``os.replace``): a reader never sees a half-written
@@ -49,6 +52,8 @@ def build_script(script: Path, fmu_path: Path, project_files) -> Path:
     os.close(handle)
     try:
         _run_builder(script, Path(partial), project_files, fmu_path.name)
+        if ls_ref_model is not None:  # the catalog's FMUs carry FMI-LS-REF (native_build/ls_ref.py)
+            _embed_ls_ref(Path(partial), ls_ref_model, fmu_path.name)
         ordinary_file_mode(partial)
         os.replace(partial, fmu_path)
     finally:
@@ -58,19 +63,33 @@ def build_script(script: Path, fmu_path: Path, project_files) -> Path:
 
 
 def _run_builder(script: Path, fmu_path: Path, project_files, label: str):
-    folders = list(dict.fromkeys(str(Path(p).resolve().parent) for p in (script, *project_files)))
-    environment = dict(os.environ, PYTHONPATH=os.pathsep.join(folders + [os.environ.get("PYTHONPATH", "")]))
-    code = ("import sys; from pythonfmu.builder import FmuBuilder; "
-            "FmuBuilder.build_FMU(sys.argv[1], dest=sys.argv[2], project_files=sys.argv[3:], "
-            "canGetAndSetFMUstate=True, canSerializeFMUstate=True)")
-    completed = subprocess.run([sys.executable, "-c", code, str(script), str(fmu_path),
-                                *map(str, project_files)], env=environment, capture_output=True, text=True)
+    """pythonfmu's builder on the files staged under their FMU names (fmu_staging.py) in a scratch folder,
+    which alone is on PYTHONPATH: the script imports them as the FMU will."""
+    with tempfile.TemporaryDirectory(prefix=".stage-", dir=fmu_path.parent) as folder:
+        staged_script, *staged_files = stage((script, *project_files), Path(folder))
+        environment = dict(os.environ, PYTHONPATH=os.pathsep.join([folder, os.environ.get("PYTHONPATH", "")]))
+        code = ("import sys; from pythonfmu.builder import FmuBuilder; "
+                "FmuBuilder.build_FMU(sys.argv[1], dest=sys.argv[2], project_files=sys.argv[3:], "
+                "canGetAndSetFMUstate=True, canSerializeFMUstate=True)")
+        completed = subprocess.run([sys.executable, "-c", code, str(staged_script), str(fmu_path),
+                                    *map(str, staged_files)], env=environment, capture_output=True, text=True,
+                                   cwd=folder)
     if completed.returncode != 0:
         raise RuntimeError(f"building {label} from {script} failed:\n{completed.stderr}")
 
 
+def _embed_ls_ref(fmu_path: Path, model: str, label: str):
+    """Append the FMU's FMI-LS-REF files (native_build/ls_ref.py), in a fresh interpreter for the reason
+    above: making the reference runs the FMU."""
+    environment = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    completed = subprocess.run([sys.executable, "-m", "native_build.ls_ref", str(fmu_path), model], cwd=ROOT,
+                               env=environment, capture_output=True, text=True)
+    if completed.returncode != 0:
+        raise RuntimeError(f"adding FMI-LS-REF to {label} failed:\n{completed.stderr}")
+
+
 def build(fmu: FmuSource) -> Path:
-    return build_script(fmu.script, fmu.fmu_path, fmu.project_files)
+    return build_script(fmu.script, fmu.fmu_path, fmu.project_files, fmu.model_identifier)
 
 
 BUILD_EDITIONS = ("python", "native", "all")  # what this script builds (native: FMI 2.0 and 3.0)

@@ -25,14 +25,14 @@ Co-simulation semantics:
 import math
 from operator import itemgetter
 
-import afc_math
-import chatter_monitor
-import initial_error_latch as latch_rule
+from fmu_src import afc_math, chatter_monitor
+from fmu_src import initial_error_latch as latch_rule
 from pythonfmu import DefaultExperiment
 # pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
 # so the project's base class is imported under that name.
-from afc_slave_base import INPUT, OUTPUT, PARAMETER, Tuning, Variable, finite, non_negative, positive
-from afc_slave_base import TableSlave as Fmi2Slave
+from fmu_src.afc_declaration import Derivative, ModelExchange, TestDrive
+from fmu_src.afc_slave_base import INPUT, OUTPUT, PARAMETER, Tuning, Variable, finite, non_negative, positive
+from fmu_src.afc_slave_base import TableSlave as Fmi2Slave
 
 _INF = math.inf
 # u depends on every error and reference input: n is a parameter (ym.. with fls_input = 2)
@@ -150,6 +150,34 @@ ERROR_OUTPUTS = ("E", "dE", "d2E", "d3E")
 ALPHA_OUTPUTS = ("alpha1", "alpha2", "alpha3", "alpha4")
 THETA_OUTPUTS = tuple(f"theta{j}" for j in range(1, afc_math.RULES_MAX + 1))
 
+
+def _model_exchange(table) -> ModelExchange:
+    """theta1..thetaN (N = the table's rule weights) and w_hat: dtheta_j = gamma tau xi_j with the
+    projection (31), dw_hat = gamma_w tau (variant 3; else 0); tau and xi depend on every input."""
+    inputs = tuple((v.name, "dependent") for v in table if v.causality == INPUT)
+    parameters = tuple(v.name for v in table if v.causality == PARAMETER)
+    thetas = [v.name for v in table if v.causality == OUTPUT and v.name.startswith("theta") and v.name[5:].isdigit()]
+    derivatives = tuple(Derivative(name, ((name, "dependent"), *inputs), parameters,
+                                   f"d{name} of the adaptive law with projection (31)") for name in thetas)
+    derivatives += (Derivative("w_hat", inputs, parameters, "dw_hat = gamma_w tau (variant 3; else 0)"),)
+    return ModelExchange(derivatives=derivatives,
+                         output_states=(("u", (*((name, "dependent") for name in thetas), ("w_hat", "fixed"))),))
+
+
+def _test_inputs(t):
+    return dict(e=0.3 * math.cos(3 * t), de=-0.9 * math.sin(3 * t), ym=0.2 * math.sin(t), dym=0.2 * math.cos(t))
+
+
+# beside the table (fmu_src/afc_declaration.py), built when asked: pythonfmu runs this script again at
+# every instantiate
+def model_exchange() -> ModelExchange:
+    """The Model Exchange interface of the native edition (docs/model_exchange.md)."""
+    return _model_exchange(VARIABLES)
+
+
+def test_drive() -> TestDrive:
+    """How the tests drive this FMU."""
+    return TestDrive(dict(variant=3), _test_inputs, 1e-3)
 
 def _vector_getter(names):
     """d -> (d[names[0]], ...) as a tuple, also for one name."""

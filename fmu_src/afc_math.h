@@ -1,6 +1,6 @@
 /* The controller of Pan, Er, Huang and Wang (IEEE TFS 19(5), 2011) as pure functions:
  * the C twin of afc_math.py, function for function, with the same names, in the general form
- * of issue 17 (plant order n = 1..4, m = 2..5 fuzzy sets per FLS input, M = m^n rules).
+ * of docs/general_order.md (plant order n = 1..4, m = 2..5 fuzzy sets per FLS input, M = m^n rules).
  * Equation numbers in brackets are the paper's.  Every function performs the same IEEE
  * floating-point operations in the same order as its Python twin (compiled with
  * -ffp-contract=off, no fast-math, calling the same libm), so the editions agree bit for bit.

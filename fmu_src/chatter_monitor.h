@@ -11,7 +11,7 @@
 #define CHATTER_AVERAGING_TIME 1.0 /* s, time constant of both averages */
 #define CHATTER_WARMUP 1.0         /* s after the start before any verdict */
 #define CHATTER_THRESHOLD_HZ 20.0  /* converged loops: < 1.9 Hz; chattering ones: > 170 Hz */
-#define CHATTER_CONVERGED_HZ 2.0   /* what converged loops stay below (measured, for the message) */
+#define CHATTER_CONVERGED_HZ 2.0   /* what converged loops stay below (docs/host_robustness.md), for the message */
 #define CHATTER_U_FLOOR 1e-9
 
 typedef struct {

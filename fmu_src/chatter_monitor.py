@@ -30,7 +30,7 @@ import math
 AVERAGING_TIME = 1.0  # s, time constant of both exponential averages
 WARMUP = 1.0  # s after the start before any verdict
 THRESHOLD_HZ = 20.0  # converged loops: < 1.9 Hz; chattering ones: > 170 Hz
-CONVERGED_HZ = 2.0  # what converged loops stay below (measured, for the message)
+CONVERGED_HZ = 2.0  # what converged loops stay below (docs/host_robustness.md), for the message
 U_FLOOR = 1e-9  # in the units of u: the mean magnitude never counts as smaller
 
 # The largest communication step validated (ITAE, IAE, Ec within 1 % of the converged run) for

@@ -211,7 +211,7 @@ class Progress:
         self._stopped = threading.Event()
         self._bar = self._heartbeat = None
         if self.mode == "bar":
-            from tqdm import tqdm  # here, not at module level: 0.1-0.3 s of import a CLI start without a study skips
+            from tqdm import tqdm  # here, not at module level: an import a CLI start without a study skips
 
             self._bar = tqdm(total=total, initial=initial, desc=description, unit=unit, file=self.stream,
                              **tqdm_options)

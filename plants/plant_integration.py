@@ -40,8 +40,8 @@ def rk4_advance(derivative, t, x1, x2, u, step_size, max_internal_step, params):
     ----------
     derivative : callable ``(t, x1, x2, u, params) -> (dx1, dx2)``
         Right-hand side of the plant, e.g.
-        ``inverted_pendulum_model.pendulum_derivative`` or
-        ``manipulator_model.manipulator_derivative``.
+        ``pendulum_derivative`` of plants/inverted_pendulum/model.py or
+        ``manipulator_derivative`` of plants/manipulator/model.py.
     t : float
         Time at the start of the communication step.
     x1, x2 : float

@@ -1,22 +1,25 @@
-"""The plant registry: one row per FMU of plants/ (the plants and the tracking reference).
+"""The plant registry: every folder of plants/ holding an ``fmu.py`` is one FMU (a plant or the tracking reference).
 
-A row names the files of one FMU by their common stem (``plants/<stem>_fmu.py``, the pythonfmu
-script; ``plants/<stem>_model.py``, its pure model; ``plants/<stem>.c``, its C edition) and what
-the harness needs to know of it: the plant's order and the in-process oracle's model (harness/
-studies/oracle.py).  Both builds take their FMU tables from here through fmu_catalog.py, so a new
-plant is its own three files, a scenario file, its references, and one row below (with its oracle
-model, when the oracle should know it).
+A model folder ``plants/<name>/`` holds (as the Modelica Reference-FMUs do)
 
+* ``fmu.py``: the declaration and the pythonfmu edition: the variable table ``VARIABLES``, the
+  slave class ``<Name>`` (the folder's name in CamelCase is the model identifier), its Model
+  Exchange interface ``model_exchange()`` and the tests' ``test_drive()`` (fmu_src/afc_declaration.py);
+* ``model.c``: the C edition (the hooks of fmu_src/fmi_layer.h);
+* ``model.py``: the pure model of an RK4 plant (its derivative; ``oracle(parameters)`` when the
+  in-process oracle of harness/studies/oracle.py should know it); the reference has none.
+
+Both builds take their FMU tables from here through fmu_catalog.py, the tests their per-FMU cases
+from the declarations: a new plant is its folder, its scenario and references, and a docs row.
 Every RK4 plant shares the integrator (plant_integration.py / .c) and the slave base class
-(rk4_plant_slave.py / .c); the reference has no state to integrate and no model module.
+(rk4_plant_slave.py / .c), which stay in plants/.
 """
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
-
-from . import inverted_pendulum_model, manipulator_model
 
 PLANTS_DIR = Path(__file__).resolve().parent
 #: what every RK4 plant's pythonfmu edition carries besides its own files (in this order)
@@ -35,72 +38,78 @@ class OracleModel:
     extra: Callable  # (t, x1, x2) -> {"plant.<output>": value} of the outputs beyond y, dy
 
 
+def model_identifier(folder_name: str) -> str:
+    """The model identifier of a model folder: its name in CamelCase (dc_motor_arm -> DcMotorArm)."""
+    return "".join(word.capitalize() for word in folder_name.split("_"))
+
+
 @dataclass(frozen=True)
 class PlantFmu:
-    model_identifier: str
-    stem: str
-    order: int | None  # states of the plant (None: the tracking reference, not a plant)
-    oracle: Callable | None = None  # parameters {name: value} -> OracleModel; None: the oracle does not know it
+    """One model folder of plants/."""
+
+    folder: Path
+
+    @property
+    def name(self) -> str:
+        return self.folder.name
+
+    @property
+    def model_identifier(self) -> str:
+        return model_identifier(self.name)
 
     @property
     def integrated(self) -> bool:
-        """An RK4 plant (with a model module and the shared integrator)."""
-        return self.order is not None
+        """An RK4 plant (with a model module and the shared integrator); the reference has neither."""
+        return (self.folder / "model.py").is_file()
 
     @property
     def script(self) -> Path:
-        return PLANTS_DIR / f"{self.stem}_fmu.py"
+        return self.folder / "fmu.py"
+
+    @property
+    def model(self) -> Path:
+        return self.folder / "model.py"
 
     @property
     def project_files(self) -> tuple[Path, ...]:
-        """The pythonfmu edition's files besides the script and the shared base class."""
-        return (PLANTS_DIR / f"{self.stem}_model.py", *RK4_PROJECT_FILES) if self.integrated else ()
+        """The pythonfmu edition's files besides the script and the shared base classes."""
+        return (self.model, *RK4_PROJECT_FILES) if self.integrated else ()
 
     @property
     def c_sources(self) -> tuple[Path, ...]:
-        return (PLANTS_DIR / f"{self.stem}.c", *(RK4_C_SOURCES if self.integrated else ()))
+        return (self.folder / "model.c", *(RK4_C_SOURCES if self.integrated else ()))
 
     @property
     def c_headers(self) -> tuple[Path, ...]:
         return RK4_C_HEADERS if self.integrated else ()
 
+    def _oracle_adapter(self) -> Callable | None:
+        """The model module's ``oracle(parameters) -> (derivative, params, extra)``, if it has one."""
+        return getattr(importlib.import_module(f"plants.{self.name}.model"), "oracle", None) if self.integrated else None
 
-# ------------------------------------------------------------------- oracle models
-def pendulum_oracle(p: dict) -> OracleModel:
-    params = inverted_pendulum_model.pendulum_params(p["gv"], p["mc"], p["mp"], p["lp"], p["dist_gain"])
+    @property
+    def has_oracle(self) -> bool:
+        return self._oracle_adapter() is not None
 
-    def extra(t, x1, x2):
-        return {"plant.d": inverted_pendulum_model.pendulum_disturbance(t, p["dist_gain"])}
-
-    return OracleModel(inverted_pendulum_model.pendulum_derivative, params, extra)
-
-
-def manipulator_oracle(p: dict) -> OracleModel:
-    params = manipulator_model.manipulator_params(p["gv"], p["lr"], p["dr"], p["cr"], p["vr"], p["mr0"], p["mr1"])
-
-    def extra(t, x1, x2):
-        mr = manipulator_model.manipulator_payload(t, p["mr0"], p["mr1"])
-        inertia = manipulator_model.manipulator_inertia(mr, p["lr"])
-        return {"plant.d": manipulator_model.manipulator_friction(x2, inertia, p["cr"], p["vr"]), "plant.mr": mr}
-
-    return OracleModel(manipulator_model.manipulator_derivative, params, extra)
+    def oracle(self, parameters: dict) -> OracleModel:
+        """The oracle's model with these parameter values."""
+        return OracleModel(*self._oracle_adapter()(parameters))
 
 
-# ------------------------------------------------------------------- the rows
-#: in the order of the built FMUs and of docs/model.md's variable tables
-PLANT_FMUS = (
-    PlantFmu("InvertedPendulum", "inverted_pendulum", order=2, oracle=pendulum_oracle),
-    PlantFmu("Manipulator", "manipulator", order=2, oracle=manipulator_oracle),
-    PlantFmu("TrackingReference", "tracking_reference", order=None),
-    PlantFmu("DcMotorArm", "dc_motor_arm", order=3),  # the third-order plant of docs/general_order.md
-)
+def discovered(folder: Path = PLANTS_DIR) -> tuple[PlantFmu, ...]:
+    """The model folders under ``folder`` (those holding an ``fmu.py``), in name order."""
+    return tuple(PlantFmu(path) for path in sorted(folder.iterdir()) if (path / "fmu.py").is_file())
+
+
+#: in the order of the built FMUs and of docs/model.md's variable tables: the folders' names
+PLANT_FMUS = discovered()
 BY_IDENTIFIER = {row.model_identifier: row for row in PLANT_FMUS}
 
 
 def oracle_model(model_identifier: str, parameters: dict) -> OracleModel:
     """The oracle's model of a plant FMU with these parameter values."""
     row = BY_IDENTIFIER.get(model_identifier)
-    if row is None or row.oracle is None:
-        known = " and ".join(r.model_identifier for r in PLANT_FMUS if r.oracle is not None)
+    if row is None or not row.has_oracle:
+        known = " and ".join(r.model_identifier for r in PLANT_FMUS if r.has_oracle)
         raise ValueError(f"the oracle knows {known}, not {model_identifier!r}")
     return row.oracle(parameters)

@@ -14,8 +14,8 @@ Standard library and pythonfmu only: it travels inside each plant FMU.
 """
 import math
 
-import plant_integration
-from afc_slave_base import TableSlave
+from fmu_src.afc_slave_base import TableSlave
+from plants import plant_integration
 
 
 class RK4PlantSlave(TableSlave):

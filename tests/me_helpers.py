@@ -2,7 +2,7 @@
 
 ``MeInstance`` wraps fmpy's FMU2Model / FMU3Model (FMI 2.0 / 3.0) with name-based access,
 captured log messages and numpy arrays for states, derivatives and event indicators.  The
-``*_reference`` functions integrate the pure Python model functions (plants/*_model.py,
+``*_reference`` functions integrate the pure Python model functions (plants/*/model.py,
 fmu_src/afc_math.py) with scipy's solve_ivp, through the same piecewise-constant inputs and,
 for the manipulator, through the same friction modes and events (docs/model_exchange.md).
 """
@@ -18,7 +18,9 @@ from fmpy.fmi2 import FMU2Model, defaultCallbacks, fmi2CallbackFunctions, fmi2Ca
 from fmpy.fmi3 import FMU3Model
 
 from fmu_src import afc_math
-from plants import dc_motor_arm_model, inverted_pendulum_model, manipulator_model
+from plants.dc_motor_arm import model as dc_motor_arm_model
+from plants.inverted_pendulum import model as inverted_pendulum_model
+from plants.manipulator import model as manipulator_model
 
 
 def _pointer(array: np.ndarray):

@@ -1,4 +1,4 @@
-"""The controller FMU: validation, fmpy CLI, feedthrough, state, bad input (issue 2)."""
+"""The controller FMU: validation, fmpy CLI, feedthrough, state, bad input."""
 import math
 import subprocess
 import sys

@@ -1,6 +1,6 @@
 """The controller's math in C (fmu_src/afc_math.c) through ctypes: P against scipy, the
-memberships and basis, Remark 3 for every order n = 1..4 and m = 2..5 (issue 17), and every
-C function against its Python twin in fmu_src/afc_math.py, bit for bit (issue 16)."""
+memberships and basis, Remark 3 for every order n = 1..4 and m = 2..5 (docs/general_order.md), and every
+C function against its Python twin in fmu_src/afc_math.py, bit for bit."""
 import ctypes
 import math
 import platform
@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import build_native
+from native_build import compiler
 from fmu_src import afc_math
 from harness import variants
 
@@ -71,7 +72,7 @@ SIGNATURES = {  # name: (restype, argtypes)
 
 @pytest.fixture(scope="module")
 def afc():
-    library = ctypes.CDLL(str(build_native.math_library()))
+    library = ctypes.CDLL(str(compiler.math_library()))
     for name, (restype, argtypes) in SIGNATURES.items():
         function = getattr(library, name)
         function.restype, function.argtypes = restype, argtypes
@@ -199,7 +200,7 @@ def test_tau_is_the_last_column_of_p_times_e(afc):
     assert afc.adaptation_signal(3, vector(error), vector(p[:, 2])) == pytest.approx(float(np.dot(error, p[:, 2])))
 
 
-# ------------------------------------------- host robustness (issue 13) in C
+# ------------------------------------------- host robustness in C
 class Latch(ctypes.Structure):
     _fields_ = [(name, ctypes.c_double) for name in
                 ("open", "origin", "previous_time", "rejected_time", "relatches", "confirmed")] + [
@@ -485,7 +486,7 @@ def test_latch_error_and_the_control_law_are_the_python_ones(afc, order, sets):
             assert bits(xi[:rules]) == bits(expected_xi)
 
 
-# --------------------------- the native controller FMU runs these functions (issue 16)
+# --------------------------- the native controller FMU runs these functions
 NATIVE_SHAPES = [(1, 5, 1), (2, 2, 3), (2, 4, 1), (3, 3, 2), (4, 2, 3), (4, 3, 1)]  # (order, sets, variant)
 
 

@@ -11,10 +11,11 @@ Rules (docs/architecture.md draws them):
   registers every subcommand), and no study imports a host runner;
 * the harness's top level holds the core only (studies in harness/studies/, host runners in
   harness/hosts/);
-* a chain of modules (``CHAINS``: the tune study's sub-package, the host matrix's modules) reads
+* a chain of modules (``CHAINS``: the tune study's sub-package, the host matrix's modules, the
+  native build's stages) reads
   from the bottom up: each module imports only the chain's modules before it, and a new module of
   harness/studies/tune/ takes its place in the chain;
-* ``build_native`` never reaches ``build_fmu`` (``build_fmu`` may import ``build_native``), and
+* ``build_native`` (and its stages, ``native_build``) never reaches ``build_fmu`` (``build_fmu`` may import ``build_native``), and
   the masters' compiled loops reach no FMU build and no FMU source: ``harness.master_loop`` and
   ``harness.me_loop`` (with their loader ``harness.compiled_loop`` and ``harness.loop_interface``)
   import only the C toolchain helper (and the core beside them), which imports no project module.
@@ -30,8 +31,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-TOP_LEVEL_MODULES = ("build_fmu", "build_native", "fmu_catalog", "c_toolchain")
-PACKAGES = ("harness", "plants", "fmu_src")
+TOP_LEVEL_MODULES = ("build_fmu", "build_native", "fmu_catalog", "fmu_staging", "c_toolchain")
+PACKAGES = ("harness", "plants", "fmu_src", "native_build")
 #: the co-simulation core at the top of harness/ (docs/architecture.md); anything else goes in a sub-package
 CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harness.scenario", "harness.variants",
         "harness.fmi", "harness.scenario_checks", "harness.master", "harness.compiled_loop", "harness.loop_interface",
@@ -40,7 +41,7 @@ CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harne
 COMPOSITION_ROOT = "harness.cli"
 STUDIES, HOSTS = "harness.studies", "harness.hosts"
 #: what the master's compiled loop may never reach, directly or through other modules
-LOOP_FORBIDDEN = ("build_native", "build_fmu", "fmu_catalog", "plants", "fmu_src")
+LOOP_FORBIDDEN = ("build_native", "native_build", "build_fmu", "fmu_catalog", "plants", "fmu_src")
 #: modules of one idea each that build on one another: each imports only those before it in its chain
 #: (harness/studies/tune/__init__.py and harness/hosts/matrix.py say what each holds)
 CHAINS = {
@@ -48,9 +49,10 @@ CHAINS = {
                              "scenario_file", "summary", "report", "comparison", "study", "command_line"),
     "harness.hosts": ("trajectory", "console_capture", "plain_fmpy", "host_runners", "host_registry", "matrix_row",
                       "matrix_prose", "matrix_report", "matrix"),
+    "native_build": ("targets", "model_exchange", "description", "header", "compiler", "sources", "ls_ref", "package"),
 }
 #: packages whose every module is in their chain (harness/hosts/ holds other hosts' bindings beside its chain)
-WHOLE_CHAINS = ("harness.studies.tune",)
+WHOLE_CHAINS = ("harness.studies.tune", "native_build")
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The native edition (C, FMI 2.0 and 3.0): binaries, API, descriptions, behaviour.
 
 The native FMUs are built once per session for the platforms in $AFC_NATIVE_PLATFORMS
-(default: linux64, win64, darwin64); the tests skip with a reason when zig's compiler
+(default: linux64, win64, darwin64, aarch64-linux); the tests skip with a reason when zig's compiler
 (pip install ziglang, the ``native`` extra) is not installed.
 """
 import math
@@ -17,6 +17,9 @@ from fmpy.fmi1 import FMICallException
 
 import build_fmu
 import build_native
+import native_build
+from native_build import compiler, description, header
+from native_build import model_exchange as native_model_exchange
 from harness import variants
 from tests.fmu_helpers import Driven
 from tests.message_meaning import meaning, parameter_error, written_as_c_does
@@ -49,16 +52,18 @@ def platforms(native):
 
 def api_functions(version: int) -> set[str]:
     """Every function of the FMI API, from the function types of fmpy's headers."""
-    text = (build_native.fmi_headers() / f"fmi{version}FunctionTypes.h").read_text()
+    text = (compiler.fmi_headers() / f"fmi{version}FunctionTypes.h").read_text()
     return set(re.findall(rf"\b(fmi{version}\w+)TYPE\b", text))
 
 
 # ------------------------------------------------------------ binary formats
 def binary_kind(data: bytes) -> str:
-    """elf-x86_64, pe-x86_64, macho-x86_64, macho-arm64 or fat:<kinds> from the magic bytes."""
+    """elf-x86_64, elf-aarch64, pe-x86_64, macho-x86_64, macho-arm64 or fat:<kinds> from the magic bytes."""
     if data[:4] == ELF_MAGIC:
         machine = struct.unpack("<H", data[18:20])[0]
-        return "elf-x86_64" if data[4] == 2 and machine == 62 else f"elf-{machine}"
+        if data[4] != 2:
+            return f"elf32-{machine}"
+        return {62: "elf-x86_64", 183: "elf-aarch64"}.get(machine, f"elf-{machine}")
     if data[:2] == b"MZ":
         offset = struct.unpack("<I", data[0x3C:0x40])[0]
         assert data[offset:offset + 4] == b"PE\0\0"
@@ -80,10 +85,12 @@ def binary_kind(data: bytes) -> str:
 EXPECTED = {
     2: {"linux64": ("binaries/linux64/{}.so", "elf-x86_64"),
         "win64": ("binaries/win64/{}.dll", "pe-x86_64"),
-        "darwin64": ("binaries/darwin64/{}.dylib", "fat:macho-arm64,macho-x86_64")},
+        "darwin64": ("binaries/darwin64/{}.dylib", "fat:macho-arm64,macho-x86_64"),
+        "aarch64-linux": ("binaries/aarch64-linux/{}.so", "elf-aarch64")},
     3: {"linux64": ("binaries/x86_64-linux/{}.so", "elf-x86_64"),
         "win64": ("binaries/x86_64-windows/{}.dll", "pe-x86_64"),
-        "darwin64": ("binaries/x86_64-darwin/{}.dylib", "macho-x86_64")},
+        "darwin64": ("binaries/x86_64-darwin/{}.dylib", "macho-x86_64"),
+        "aarch64-linux": ("binaries/aarch64-linux/{}.so", "elf-aarch64")},
 }
 
 
@@ -141,17 +148,20 @@ def test_the_arm64_macos_binaries_are_signed_as_apple_silicon_requires(native, p
 
 def test_the_linux_binaries_need_only_libc_and_libm_of_glibc_2_17(native, platforms):
     lief = pytest.importorskip("lief")
-    if "linux64" not in platforms:
-        pytest.skip("linux64 not built")
+    folders = {"linux64": ((2, "linux64"), (3, "x86_64-linux")),
+               "aarch64-linux": ((2, "aarch64-linux"), (3, "aarch64-linux"))}
+    built = [pair for platform, pairs in folders.items() if platform in platforms for pair in pairs]
+    if not built:
+        pytest.skip("neither linux64 nor aarch64-linux built")
     for model in MODELS:
-        for version, folder in ((2, "linux64"), (3, "x86_64-linux")):
+        for version, folder in built:
             data = binaries(native[model][version])[f"binaries/{folder}/{model}.so"]
             elf = lief.parse(list(data))
-            assert sorted(elf.libraries) == ["libc.so.6", "libm.so.6"], model
+            assert sorted(elf.libraries) == ["libc.so.6", "libm.so.6"], (model, folder)
             versions = {requirement.name for requirement in
                         (aux for entry in elf.symbols_version_requirement for aux in entry.get_auxiliary_symbols())}
             newest = max(tuple(map(int, v.split("_")[1].split("."))) for v in versions if v.startswith("GLIBC_"))
-            assert newest <= (2, 17), f"{model}: needs {sorted(versions)}"
+            assert newest <= (2, 17), f"{model} ({folder}): needs {sorted(versions)}"
 
 
 # ------------------------------------------------------------- descriptions
@@ -200,7 +210,7 @@ def test_native_binaries_carry_no_build_path(native, model):
             for name in archive.namelist():
                 if name.startswith("binaries/"):
                     data = archive.read(name)
-                    for path in (str(build_native.ROOT), "build/native/obj", "/tmp/"):
+                    for path in (str(native_build.ROOT), "build/native/obj", "/tmp/"):
                         assert path.encode() not in data, (name, path)
 
 
@@ -217,7 +227,7 @@ def test_the_editions_declare_the_same_variables(native, fmu_paths, model):
     python = _variables(fmu_paths[model])
     # beyond the table, the native edition declares its Model Exchange variables: der(x), event
     # indicators and locals (tests/test_model_exchange.py checks them)
-    extras = build_native.model_exchange(model).extra_names()
+    extras = native_model_exchange.model_exchange(model).extra_names()
     for version in (2, 3):
         described = _variables(native[model][version])
         for part in (python, described):
@@ -239,10 +249,10 @@ def test_the_native_descriptions_follow_the_declaration_table(native, monkeypatc
     original = cls.VARIABLES
     changed = tuple(v if v.name != "omega" else type(v)(**{**v.__dict__, "start": 2.5}) for v in original)
     monkeypatch.setattr(cls, "VARIABLES", changed)
-    root = build_native.fmi2_description("TrackingReference", "{guid}")
+    root = description.fmi2_description("TrackingReference", "{guid}")
     omega = next(e for e in root.find("ModelVariables") if e.get("name") == "omega")
     assert float(omega[0].get("start")) == 2.5
-    assert "2.5" in build_native.variables_header("TrackingReference", "{guid}")
+    assert "2.5" in header.variables_header("TrackingReference", "{guid}")
 
 
 # -------------------------------------------------------------- compliance

@@ -1,4 +1,4 @@
-"""harness/cases.py: progress of long commands where no bar can be drawn (issue 23, item 4).
+"""harness/cases.py: progress of long commands where no bar can be drawn.
 
 `tables` printed nothing for 4 minutes under `| cat` or in a CI log: tqdm's bar is drawn only on a
 terminal.  Elsewhere a long command now prints lines to stderr: none if it is done within

@@ -93,7 +93,7 @@ def test_a_tie_is_not_decided():
 
 
 def test_a_gap_below_the_numerical_error_is_not_decided_the_issue_case_1_ec():
-    """The numbers of issue 14: vud 418.234 -> 418.222, fae 418.322 -> 418.169 (0.4 -> 0.2 ms)."""
+    """The step study's numbers: vud 418.234 -> 418.222, fae 418.322 -> 418.169 (0.4 -> 0.2 ms)."""
     ladder_set = ladders({("pendulum_case1", "vud", "Ec"): (418.234, 418.222),
                           ("pendulum_case1", "fixed", "Ec"): (430.500, 430.485),
                           ("pendulum_case1", "fae", "Ec"): (418.322, 418.169)})
@@ -208,7 +208,7 @@ def test_refinement_runs_the_open_cases_at_half_their_finest_step_and_decides_ag
     assert requested == []  # nothing open: nothing run
 
 
-# ------------------------------------------------------------------ issue 23: close margins, undefined scores
+# ------------------------------------------------------------------ close margins, undefined scores
 def test_a_comparison_decided_by_a_small_margin_says_close():
     """Case 1 Ec of our run: fae 418.114 +- 0.092 below vud 418.2182 +- 0.0071, a gap of 0.02 %."""
     ladder_set = ladders({("pendulum_case1", "vud", "Ec"): (418.2253, 418.2182),
@@ -230,7 +230,7 @@ def test_a_comparison_decided_by_a_small_margin_says_close():
 
 
 def test_a_score_the_horizon_does_not_define_decides_nothing_and_asks_no_finer_run():
-    """Issue 23, item 2: on a 0.3 s run es1, es2 are n/a in the tables, so the claims must not decide them."""
+    """On a 0.3 s run es1, es2 are n/a in the tables, so the claims must not decide them."""
     ladder_set = ladders()
     for rows in ladder_set.values():
         for row in rows:

@@ -32,7 +32,7 @@ from harness import variants
 NO_VARIANT = max(variants.CONTROLLER_VARIANTS.values()) + 1  # one past the last row: beyond the FMU's declared max
 NUMERIC_TYPES = {cli_args.positive_float: True, cli_args.positive_int: True,
                  cli_args.non_negative_float: False, cli_args.non_negative_int: False}  # type -> zero is bad
-BAD_NUMBERS = ("abc", "nan", "inf", "-inf", "-1", "-1e-4")  # "-1e-4": a value, not an option (issue 23)
+BAD_NUMBERS = ("abc", "nan", "inf", "-inf", "-1", "-1e-4")  # "-1e-4": a value, not an option
 
 
 def subparsers() -> dict:
@@ -268,7 +268,7 @@ def misspelt_option(option: str) -> str:
 
 
 def test_a_misspelt_option_or_choice_gets_its_close_match(no_handler, capsys):
-    """Issue 23, item 3: "--contoller" said only "unrecognized arguments"; argparse before 3.14 suggests nothing."""
+    """A misspelt option: "--contoller" once said only "unrecognized arguments"; argparse before 3.14 suggests nothing."""
     assert cli.main(["run", "pendulum_case1", "--contoller", "vud"]) == 2
     assert _one_error_line(capsys.readouterr().err) == (
         "python -m harness run: error: unrecognized option --contoller; did you mean --controller? "
@@ -296,7 +296,7 @@ def test_a_misspelt_option_or_choice_gets_its_close_match(no_handler, capsys):
 
 
 def test_a_negative_number_in_any_notation_is_a_value_refused_with_the_valid_range(no_handler, capsys):
-    """Issue 23, item 3: "--step -1e-4" was read as an option ("expected one argument")."""
+    """A negative number: "--step -1e-4" was once read as an option ("expected one argument")."""
     for value in ("-1e-4", "-1E+3", "-.5", "-2.", "-inf", "-Infinity", "-nan"):
         assert cli.main(["run", "pendulum_case1", "--step", value]) == 2
         line = _one_error_line(capsys.readouterr().err)
@@ -364,7 +364,7 @@ def scenario_mutations() -> list:
 
 def test_every_scenario_key_misspelt_and_every_value_of_the_wrong_type_is_one_line_and_exit_2(fmu_paths, tmp_path,
                                                                                                  capsys):
-    """Issue 23, item 1: a scenario file is checked as strictly as the command line."""
+    """A scenario file is checked as strictly as the command line."""
     mutations = scenario_mutations()
     assert len(mutations) > 150  # every key of pendulum_case1.toml twice, every recorded name once
     failures = []

@@ -1,4 +1,4 @@
-"""harness/studies/compat.py: the FMUs' compatibility information in the FMI cross-check layout (issue 24).
+"""harness/studies/compat.py: the FMUs' compatibility information in the FMI cross-check layout.
 
 ``python -m harness compat --out DIR`` runs once for the module: every FMU of both editions (FMI 2.0
 co-simulation of the pythonfmu edition; FMI 2.0 and 3.0 of the native edition, with Model Exchange
@@ -163,7 +163,7 @@ def test_a_reference_that_fmpy_does_not_reproduce_is_marked_failed(published, tm
 
 
 def test_the_interfaces_come_from_the_model_description(fmu_paths, tmp_path):
-    """A model description that declares ModelExchange gets an "me" entry (the native FMUs of issue 21's
+    """A model description that declares ModelExchange gets an "me" entry (the native FMUs'
     branch declare it); here one declaring both is made from a co-simulation FMU's description."""
     source = fmu_paths["TrackingReference"]
     assert compat.interfaces(source) == ["cs"]

@@ -1,4 +1,4 @@
-"""The third-order plant DcMotorArm and its closed loop with the order-3 controller (issue 17).
+"""The third-order plant DcMotorArm and its closed loop with the order-3 controller.
 
 The closed-loop check below is written from the equations (docs/general_order.md) with numpy and
 scipy only: it shares no code with fmu_src/ or plants/.
@@ -12,7 +12,9 @@ from scipy.linalg import solve_continuous_lyapunov
 
 from harness import scenario as scenarios
 from harness.master import simulate
-from plants import dc_motor_arm_model, inverted_pendulum_model, plant_integration
+from plants import plant_integration
+from plants.dc_motor_arm import model as dc_motor_arm_model
+from plants.inverted_pendulum import model as inverted_pendulum_model
 
 
 def test_n_state_rk4_gives_the_two_state_results_bit_for_bit():

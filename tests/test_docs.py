@@ -88,7 +88,7 @@ def test_no_page_cites_the_projects_working_notes():
 
 
 def test_readme_stays_a_readme():
-    """The manual lives in docs/: the README stays short (issue 21: at most about 150 lines)."""
+    """The manual lives in docs/: the README stays short (at most about 150 lines)."""
     lines = (ROOT / "README.md").read_text().splitlines()
     assert len(lines) <= 160, f"README.md has {len(lines)} lines; move sections to docs/"
 

@@ -32,6 +32,8 @@ from pathlib import Path
 import pytest
 from packaging.requirements import Requirement
 
+from fmu_src import chatter_monitor
+
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
@@ -122,8 +124,6 @@ def test_the_controller_fmu_proposes_the_pendulums_jacobi_step(fmu_paths):
 
 def test_the_chatter_warning_quoted_in_the_docs_is_the_fmus():
     """docs/host_robustness.md quotes the warning of one run: its wording and its steps are the module's."""
-    sys.path.insert(0, str(ROOT / "fmu_src"))
-    import chatter_monitor
 
     quoted = re.search(r"`controller: (u chatters with communication step ([0-9.e-]+) s: [^`]+)`",
                        page("docs/host_robustness.md"))

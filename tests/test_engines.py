@@ -1,4 +1,4 @@
-"""SSP export and two FMI engines that are not ours (issue 6): Ecos and fmpy's SSP simulator.
+"""SSP export and two FMI engines that are not ours: Ecos and fmpy's SSP simulator.
 
 The closed loop (manipulator, vud, 0 - 2 s) runs in our master (jacobi and
 the default feedthrough), in Ecos and in fmpy's SSP simulator from one

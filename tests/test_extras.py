@@ -1,4 +1,4 @@
-"""What an install pulls in (issue 23, item 6): the core install (`pip install -e .`) is what the main job
+"""What an install pulls in: the core install (`pip install -e .`) is what the main job
 and the FMUs need; the host studies, the cluster, the native edition and the tests are extras, and a
 command that needs a missing extra says which, in one line.
 

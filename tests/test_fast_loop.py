@@ -4,7 +4,7 @@ Which test files test a module: the rows of tests/README.md (a cell names a modu
 glob of paths, a folder, or a bare file name read in the folder the cell named last). A module is
 held to a fast test when one of those files holds a test function that conftest.SLOW does not list.
 Modules that hold nothing but a docstring (empty package files) need none. Nothing is imported but
-conftest: the test functions are read with ``ast``.
+conftest and test_architecture's lists of modules: the test functions are read with ``ast``.
 """
 from __future__ import annotations
 
@@ -13,11 +13,10 @@ import re
 from pathlib import Path
 
 from tests import conftest
+from tests.test_architecture import PACKAGES, TOP_LEVEL_MODULES  # the project's modules, as its import rules see them
 
 ROOT = Path(__file__).resolve().parents[1]
 TESTS = ROOT / "tests"
-TOP_LEVEL_MODULES = ("build_fmu", "build_native", "fmu_catalog", "c_toolchain")
-PACKAGES = ("harness", "plants", "fmu_src")
 
 
 def project_modules(root: Path) -> list:
@@ -38,13 +37,15 @@ def covering_files(readme: str, modules) -> dict:
                 folder = item if item.endswith("/") else item.rsplit("/", 1)[0] + "/"
                 pattern = item
             else:
-                pattern = folder + item
+                pattern = folder + item  # or a top-level module: both are tried
             if pattern.endswith("/"):
                 pattern += "**"
             elif not re.search(r"\.py$|\*$", pattern):
                 continue  # a function, a C file, a command
+            patterns = {pattern, item} if "/" not in item else {pattern}
             for module in modules:
-                if Path(module).match(pattern) or (pattern.endswith("*") and module.startswith(pattern.rstrip("*"))):
+                if any(Path(module).match(p) and module.count("/") == p.count("/") or
+                       (p.endswith("*") and module.startswith(p.rstrip("*"))) for p in patterns):
                     covering[module].add(test_file)
     return covering
 

@@ -1,4 +1,4 @@
-"""FMI's rules of the calling sequence, on every FMU (issue 14, item 3).
+"""FMI's rules of the calling sequence, on every FMU.
 
 Each rule is driven through fmpy's low-level API as a host would: a write to a fixed
 parameter after initialisation, doStep before initialisation or after fmi2Terminate,

@@ -1,4 +1,4 @@
-"""The controller for plants of order n = 1..4 with m = 2..5 fuzzy sets per input (issue 17)."""
+"""The controller for plants of order n = 1..4 with m = 2..5 fuzzy sets per input (docs/general_order.md)."""
 import math
 import random
 
@@ -51,7 +51,7 @@ def test_each_set_peaks_in_its_own_part_of_the_universe(sets):
 @pytest.mark.parametrize("z", [-1e6, -50.0, -1.0, -1e-9, 0.0, -0.0, 1e-12, 0.3, 2.0, 1e6])
 @pytest.mark.parametrize("slope", [1.5, 7.0])
 def test_two_sets_are_the_papers_pair_bit_for_bit(z, slope):
-    def old_high(z, slope):  # the paper's pair as the project computed it before issue 17
+    def old_high(z, slope):  # the paper's pair as the project computed it before the general form
         a = slope * z
         if a >= 0.0:
             return 1.0 / (1.0 + math.exp(-a))
@@ -123,7 +123,7 @@ def test_modified_error_returns_the_derivative_chain(order):
 def test_modified_error_of_order_two_is_the_papers_formula_bit_for_bit():
     e0, de0, lam = 0.37, -0.21, 5.0
     for t in (0.0, 0.013, 0.4, 3.7):
-        a0, a1 = e0, de0 + lam * e0  # the paper's choice (Remark 3) as computed before issue 17
+        a0, a1 = e0, de0 + lam * e0  # the paper's choice (Remark 3) as computed before the general form
         decay = math.exp(-lam * t)
         offset = (a0 + a1 * t) * decay
         offset_rate = (a1 - lam * (a0 + a1 * t)) * decay

@@ -14,6 +14,7 @@ import random
 import pytest
 
 import build_native
+from native_build import compiler
 from fmu_src import initial_error_latch as latch_py
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
@@ -32,7 +33,7 @@ class Latch(ctypes.Structure):  # InitialErrorLatch of initial_error_latch.h
 
 @pytest.fixture(scope="module")
 def library():
-    return ctypes.CDLL(str(build_native.math_library()))
+    return ctypes.CDLL(str(compiler.math_library()))
 
 
 def _vector(values):

@@ -1,4 +1,4 @@
-"""The co-simulation master (issue 4): oracle agreement, delays, failures, scenario mistakes."""
+"""The co-simulation master: oracle agreement, delays, failures, scenario mistakes."""
 import json
 import re
 import subprocess
@@ -73,7 +73,7 @@ def test_run_json_prints_exactly_one_object_with_the_keys(fmu_paths, capsys):
     assert list(summary) == ["scenario", "controller", "step", "ts", "es1_pct", "es2_pct", "ITAE", "IAE",
                              "Ec", "umax", "tv_u", "wall_s", "us_per_step", "warnings"]
     assert summary["scenario"] == "pendulum_case1" and summary["controller"] == "fae"
-    # issue 23, item 2: a score the run cannot give is null, with its reason, never a number
+    # a score the run cannot give is null, with its reason, never a number
     assert summary["ts"] is None and summary["es1_pct"] is None and summary["es2_pct"] is None  # 0.2 s
     assert summary["warnings"] == [
         "ts not settled: |e| is outside the 5 % band of max|ym| at the stop time 0.2 s, or enters it only at the "

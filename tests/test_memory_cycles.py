@@ -1,4 +1,4 @@
-"""Memory a long-running host keeps per FMU life cycle (issue 23, item 8).
+"""Memory a long-running host keeps per FMU life cycle.
 
 A host that instantiates, initialises, terminates and frees an FMU again and again in one
 process (a sweep worker, a test runner, a tool that re-instantiates per run) must not grow

@@ -87,3 +87,28 @@ def test_a_wrong_citation_is_caught():
     assert problems_in("docs/model.md section 99 (scores)", sections, choice_titles)
     assert problems_in("docs/model.md section 10, choice 99 (settling time)", sections, choice_titles)
     assert problems_in("docs/model.md section 7 (the plants) and section 11 (scores)", sections, choice_titles)
+
+
+#: "issue 17", "issues 16, 22", "Issue #3": a ticket number a reader of the repository cannot open
+CITES_AN_ISSUE = re.compile(r"(?i)\bissues? ?#?\d+")
+DOCUMENTS = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "native_build").glob("*.py"),
+             ROOT / ".ci" / "run"]
+
+
+def issue_citations(paths) -> list:
+    return [f"{p.relative_to(ROOT)}:{number}: {line.strip()}" for p in paths if p.exists()
+            for number, line in enumerate(p.read_text(errors="replace").splitlines(), start=1)
+            if CITES_AN_ISSUE.search(line)]
+
+
+def test_nothing_cites_an_issue_number():
+    """Comments, docstrings and docs say what a rule is, not which ticket asked for it."""
+    found = issue_citations([p for p in [*SOURCES, *DOCUMENTS] if p != Path(__file__)])
+    assert not found, "cite the rule or docs/, not an issue number:\n" + "\n".join(found)
+
+
+def test_an_issue_citation_is_caught(tmp_path):
+    source = tmp_path / "x.py"
+    source.write_text('"""The sweep (issue 9)."""\nLIMIT = 3  # see issues 16, 22\nOK = "tissue 3"\n')
+    found = [line for number, line in enumerate(source.read_text().splitlines(), 1) if CITES_AN_ISSUE.search(line)]
+    assert found == ['"""The sweep (issue 9)."""', "LIMIT = 3  # see issues 16, 22"]

@@ -1,6 +1,6 @@
 """The native FMUs' Model Exchange interface, FMI 2.0 and 3.0 (docs/model_exchange.md).
 
-* the derivatives are the pure Python model functions' (plants/*_model.py, fmu_src/afc_math.py),
+* the derivatives are the pure Python model functions' (plants/*/model.py, fmu_src/afc_math.py),
   bit for bit, in every friction mode of the manipulator and every controller variant;
 * ``fmpy simulate --interface-type ModelExchange`` runs each FMU alone (inputs from a CSV of
   piecewise-constant signals) and agrees with solve_ivp of the Python model, the manipulator's
@@ -26,8 +26,12 @@ from fmpy.fmi1 import FMICallException
 
 import build_fmu
 import build_native
+import fmu_catalog
+from native_build import model_exchange as native_model_exchange
 from fmu_src import afc_math
-from plants import dc_motor_arm_model, inverted_pendulum_model, manipulator_model
+from plants.dc_motor_arm import model as dc_motor_arm_model
+from plants.inverted_pendulum import model as inverted_pendulum_model
+from plants.manipulator import model as manipulator_model
 from tests import me_helpers as me
 from tests.fmu_helpers import Driven
 from tests.message_meaning import meaning
@@ -408,20 +412,15 @@ def test_a_slipping_arm_stops_where_x2_crosses_zero_and_sticks_or_reverses(nativ
 
 
 # --------------------------------------------------------------- FMU state
-def _controller_inputs(t):
-    return dict(e=0.3 * math.cos(3 * t), de=-0.9 * math.sin(3 * t), ym=0.2 * math.sin(t), dym=0.2 * math.cos(t))
+def run_of(model: str) -> tuple:
+    """(parameters, inputs at t, step) of the model's test drive (its script's test_drive()): the
+    manipulator slides, sticks at t ~ 2 ms (the state is taken at 5 ms, stuck) and breaks away
+    when u jumps at 7 ms."""
+    drive = fmu_catalog.declaration(model).test_drive()
+    return drive.parameters, drive.inputs, drive.step
 
 
-# (parameters, inputs at t, step): the manipulator slides, sticks at t ~ 2 ms (the state is taken at 5 ms,
-# stuck) and breaks away when u jumps at 7 ms
-RUNS = {
-    "InvertedPendulum": (dict(dist_gain=1.0), lambda t: {"u": math.sin(3 * t)}, 1e-3),
-    "Manipulator": (dict(mr0=0.2, mr1=0.0, x1_start=math.pi / 2, x2_start=0.2),
-                    lambda t: {"u": 0.7 if t < 0.007 - 1e-12 else -2.0}, 1e-4),
-    "DcMotorArm": ({}, lambda t: {"u": 5.0 * math.cos(t)}, 1e-3),
-    "AdaptiveFuzzyController": (dict(variant=3), _controller_inputs, 1e-3),
-    "TrackingReference": ({}, lambda t: {"y": 0.1 * t, "dy": 0.1}, 1e-3),
-}
+RUNS = {model: run_of(model) for model in MODELS}
 
 
 def _run(fmu: me.MeInstance, model: str, first: int, last: int, outputs) -> list:
@@ -631,7 +630,7 @@ def _expected_initial(model: str, name: str) -> list:
     rows = {v.name: v for v in table(model).VARIABLES}
     if name in rows:
         return sorted(initial_dependencies(table(model).VARIABLES, rows[name]))
-    declaration = build_native.model_exchange(model)
+    declaration = native_model_exchange.model_exchange(model)
     derivative = next(d for d in declaration.derivatives if f"der({d.state})" == name)
     knowns = set(derivative.parameters)
     for known, _ in derivative.depends_on:
@@ -648,7 +647,7 @@ def test_the_model_structure_declares_the_table_s_dependencies(native, fmu_paths
     path = fmu_paths[model] if edition == "python" else native[model][int(edition[-1])]
     md = read_model_description(str(path))
     rows = {v.name: v for v in table(model).VARIABLES}
-    declaration = build_native.model_exchange(model)
+    declaration = native_model_exchange.model_exchange(model)
     output_states = dict(declaration.output_states)
     # Outputs: the inputs of the table's depends_on; in the native edition also the states
     assert sorted(u.variable.name for u in md.outputs) == sorted(n for n, v in rows.items() if v.causality == "output")
@@ -728,7 +727,7 @@ def test_every_numerical_dependency_is_declared_in_continuous_time(native, model
     try:
         fmu.initialize(**parameters, **inputs(0.3))
         fmu.set_time(0.3)
-        fmu.md_states = [d.state for d in build_native.model_exchange(model).derivatives]
+        fmu.md_states = [d.state for d in native_model_exchange.model_exchange(model).derivatives]
         declared = {u.variable.name: set(_names(u))
                     for u in (*fmu.md.outputs, *fmu.md.derivatives, *fmu.md.eventIndicators)}  # (FMI 3.0's)
         x = fmu.states() + np.linspace(0.1, 0.3, fmu.nx)  # away from the start values (thetas unequal)

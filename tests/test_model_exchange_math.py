@@ -12,7 +12,7 @@ import random
 import pytest
 
 from fmu_src import afc_math
-from plants import manipulator_model as model
+from plants.manipulator import model
 
 PARAMS = model.manipulator_params(9.8, 0.25, 2.0, 1.5, 0.3, 5.0, 4.0)
 

@@ -1,4 +1,4 @@
-"""No silent changes (issue 14, item 5): whole-step stops, atomic builds, a verified Dask FMU cache."""
+"""No silent changes: whole-step stops, atomic builds, a verified Dask FMU cache."""
 import hashlib
 import os
 import subprocess

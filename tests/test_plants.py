@@ -1,4 +1,4 @@
-"""The plant FMUs InvertedPendulum, Manipulator and the TrackingReference (issue 3).
+"""The plant FMUs InvertedPendulum, Manipulator and the TrackingReference.
 
 Driven through fmpy's low-level API (FMU2Slave): accuracy against scipy's
 solve_ivp, the friction and payload outputs, the reference's feedthrough,
@@ -22,12 +22,15 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 import build_fmu  # noqa: E402
+import fmu_catalog  # noqa: E402
 from tests.fmu_helpers import Driven  # noqa: E402
-from plants import inverted_pendulum_model, manipulator_model, plant_integration  # noqa: E402
+from plants import plant_integration  # noqa: E402
+from plants.inverted_pendulum import model as inverted_pendulum_model  # noqa: E402
+from plants.manipulator import model as manipulator_model  # noqa: E402
 from plants import registry as plant_registry  # noqa: E402
 
-#: every FMU of the plant registry: a new row is tested here as soon as it is added (its STATE_CASES
-#: entry and its dependencies below are then required)
+#: every FMU of the plant registry: a new model folder is tested here as soon as it is added (its
+#: dependencies, state round trip and bad parameters come from its fmu.py)
 PLANTS = tuple(row.model_identifier for row in plant_registry.PLANT_FMUS)
 RTOL, ATOL = 1e-10, 1e-12  # solve_ivp reference tolerances
 
@@ -355,37 +358,30 @@ def test_reference_e_and_de_are_direct_feedthrough(plant_fmus):
 
 
 def test_model_structure_declares_the_true_dependencies(plant_fmus):
-    expected = {
-        "InvertedPendulum": {"y": [], "dy": [], "d": []},
-        "Manipulator": {"y": [], "dy": [], "d": [], "mr": []},
-        "TrackingReference": {"ym": [], "dym": [], "ddym": [], "e": ["y"], "de": ["dy"], "d2e": ["d2y"]},
-        "DcMotorArm": {"y": [], "dy": [], "d2y": [], "i": []},
-    }
+    """Each output's dependencies in the description are the inputs its table row names (direct
+    feedthrough), none else."""
     for name, (path, _) in plant_fmus.items():
+        expected = {v.name: sorted(v.depends_on) for v in fmu_catalog.model_class(name).VARIABLES
+                    if v.causality == "output"}
         md = read_model_description(str(path))
         deps = {u.variable.name: sorted(d.name for d in u.dependencies) for u in md.outputs}
-        assert deps == expected[name]
+        assert deps == expected, name
         assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
 
 
 # ------------------------------------------------------------------ state
-STATE_CASES = {
-    "InvertedPendulum": (dict(dist_gain=1.0, mp=1.0, max_internal_step=2e-4), ("y", "dy", "d")),
-    "Manipulator": (dict(mr1=3.0, cr=2.0), ("y", "dy", "d", "mr")),
-    "TrackingReference": (dict(amplitude=1.0, omega=2.0), ("ym", "dym", "ddym", "e", "de")),
-    "DcMotorArm": (dict(b=0.3, L=0.2, x3_start=0.1), ("y", "dy", "d2y", "i")),
-}
+def outputs_of(name) -> tuple:
+    return tuple(v.name for v in fmu_catalog.model_class(name).VARIABLES if v.causality == "output")
 
 
-def drive(instance, name, first, count, h, outputs):
-    """count communication steps from step index first; the outputs after each."""
+def drive(instance, name, first, count, outputs):
+    """count communication steps of the FMU's test drive from step index first; the outputs after each."""
+    test_drive = fmu_catalog.declaration(name).test_drive()
+    h = test_drive.step
     record = []
     for k in range(first, first + count):
         t = k * h
-        if name == "TrackingReference":
-            instance.set(y=0.3 * math.sin(2 * t), dy=0.6 * math.cos(2 * t))
-        else:
-            instance.set(u=4.0 * math.sin(3 * t) + 1.0)
+        instance.set(**test_drive.inputs(t))
         instance.slave.doStep(t, h)
         record.append(instance.get(*outputs))
     return record
@@ -393,22 +389,22 @@ def drive(instance, name, first, count, h, outputs):
 
 @pytest.mark.parametrize("name", PLANTS)
 def test_state_restore_and_serialization_give_bit_identical_continuations(plant_fmus, name):
-    overrides, outputs = STATE_CASES[name]
-    h = 1e-3
-    fmu = Instance(plant_fmus, name).initialize(**overrides)
+    """Along the FMU's test drive (its parameters, its inputs u(t), its step; fmu.py's test_drive())."""
+    outputs = outputs_of(name)
+    fmu = Instance(plant_fmus, name).initialize(**fmu_catalog.declaration(name).test_drive().parameters)
     other = None
     try:
-        drive(fmu, name, 0, 200, h, outputs)
+        drive(fmu, name, 0, 200, outputs)
         state = fmu.slave.getFMUstate()
-        first = drive(fmu, name, 200, 200, h, outputs)
+        first = drive(fmu, name, 200, 200, outputs)
         fmu.slave.setFMUstate(state)
-        assert drive(fmu, name, 200, 200, h, outputs) == first
+        assert drive(fmu, name, 200, 200, outputs) == first
         serialized = fmu.slave.serializeFMUstate(state)
         fmu.slave.freeFMUstate(state)
         other = Instance(plant_fmus, name).initialize()  # default parameters: the state brings them
         restored = other.slave.deSerializeFMUstate(serialized)
         other.slave.setFMUstate(restored)
-        assert drive(other, name, 200, 200, h, outputs) == first
+        assert drive(other, name, 200, 200, outputs) == first
         other.slave.freeFMUstate(restored)
     finally:
         fmu.free()
@@ -417,34 +413,37 @@ def test_state_restore_and_serialization_give_bit_identical_continuations(plant_
 
 
 # ------------------------------------------------------------- validation
-BAD_PARAMETERS = [
-    ("InvertedPendulum", "gv", 0.0), ("InvertedPendulum", "gv", -9.8), ("InvertedPendulum", "gv", math.nan),
-    ("InvertedPendulum", "mc", 0.0), ("InvertedPendulum", "mc", -1.0),
-    ("InvertedPendulum", "mp", 0.0), ("InvertedPendulum", "mp", -0.1),
-    ("InvertedPendulum", "lp", 0.0), ("InvertedPendulum", "lp", -0.5),
-    ("InvertedPendulum", "x1_start", math.nan), ("InvertedPendulum", "x2_start", math.inf),
-    ("InvertedPendulum", "dist_gain", math.nan),
-    ("InvertedPendulum", "max_internal_step", 0.0), ("InvertedPendulum", "max_internal_step", -1e-4),
-    ("InvertedPendulum", "max_internal_step", math.nan),
-    ("Manipulator", "gv", 0.0), ("Manipulator", "lr", 0.0), ("Manipulator", "lr", -0.25),
-    ("Manipulator", "dr", -2.0), ("Manipulator", "cr", -1.5), ("Manipulator", "vr", -0.3),
-    ("Manipulator", "mr0", 0.0), ("Manipulator", "mr0", -5.0), ("Manipulator", "mr0", math.nan),
-    ("Manipulator", "mr1", -1.0), ("Manipulator", "mr1", 5.0), ("Manipulator", "mr1", 7.0),
-    ("Manipulator", "x1_start", math.nan),
-    ("Manipulator", "max_internal_step", 0.0), ("Manipulator", "max_internal_step", -1e-4),
-    ("TrackingReference", "omega", 0.0), ("TrackingReference", "omega", -1.0),
-    ("TrackingReference", "amplitude", math.nan),
-]
+def out_of_range(variable) -> list:
+    """Values the declared valid range of a Real parameter rejects: NaN and inf always; the bound
+    itself when it is excluded, and a value beyond each bound."""
+    values = [math.nan, math.inf]
+    for bound, excluded, beyond in ((variable.minimum, variable.exclusive_minimum, -1.0),
+                                    (variable.maximum, variable.exclusive_maximum, 1.0)):
+        if bound is not None:
+            values += ([bound] if excluded else []) + [bound + beyond * max(1.0, abs(variable.start))]
+    return values
 
 
-@pytest.mark.parametrize("name, parameter, value", BAD_PARAMETERS)
-def test_bad_parameter_fails_with_a_message_naming_it_and_its_range(plant_fmus, name, parameter, value):
+def bad_parameters(name) -> list:
+    """(parameter, value, other parameters) of every value the FMU must reject: out of each parameter's
+    declared range, and the cross-parameter violations its test drive names."""
+    cases = [(v.name, value, {}) for v in fmu_catalog.model_class(name).VARIABLES
+             if v.causality == "parameter" and v.kind == "Real" for value in out_of_range(v)]
+    return cases + list(fmu_catalog.declaration(name).test_drive().cross_parameter_violations)
+
+
+BAD_PARAMETERS = [(name, *case) for name in PLANTS for case in bad_parameters(name)]
+
+
+@pytest.mark.parametrize("name, parameter, value, others", BAD_PARAMETERS)
+def test_bad_parameter_fails_with_a_message_naming_it_and_its_range(plant_fmus, name, parameter, value, others):
     """Finite bad values fail at exitInitializationMode; NaN/inf already at setReal (the base rejects
     non-finite values as they are set).  pythonfmu 0.7 reports fmi2Fatal for any Python exception."""
     fmu = Instance(plant_fmus, name)
     try:
         fmu.slave.setupExperiment(startTime=0.0)
         fmu.slave.enterInitializationMode()
+        fmu.set(**others)
         with pytest.raises(FMICallException) as failure:
             fmu.set(**{parameter: value})
             assert math.isfinite(value), "a non-finite value must be rejected by setReal"

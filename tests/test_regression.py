@@ -1,4 +1,4 @@
-"""Regression against the committed reference results (issue 6): all 12 cases, a mutation, the rules.
+"""Regression against the committed reference results: every scenario x variant, a mutation, the rules.
 
 The 12 cases and the gamma mutation run once per session in a process pool
 (every core, about a minute on 2 cores); the other tests use fabricated runs
@@ -32,7 +32,7 @@ def test_all_twelve_cases_stay_inside_their_reference_tubes(regression_runs, tmp
     paper = {(n, c) for n in ("pendulum_case1", "pendulum_case2", "pendulum_case3", "manipulator")
              for c in ("vud", "fixed", "fae")}
     assert paper <= {(c.scenario, c.controller) for c in cases}
-    # every scenario file x every variant of the registry (the paper's 12 and motor_arm's 3, issue 17)
+    # every scenario file x every variant of the registry (the paper's 12 and motor_arm's 3)
     assert len(cases) == len(scenarios.scenario_names()) * len(variants.NAMES) >= 15
     outcome = regression.regress(cases, runs=[regression_runs[c] for c in cases], report_dir=tmp_path)
     table = "\n".join(" | ".join(map(str, row)) for row in regression.summary_rows(outcome.comparisons))

@@ -1,4 +1,4 @@
-"""`regress` on a user's own scenario (issue 24), and its outputs (harness/studies/regression_report.py).
+"""`regress` on a user's own scenario, and its outputs (harness/studies/regression_report.py).
 
 The plant is one the project does not ship: a first-order lag made with plain pythonfmu in the test
 (tests/data/first_order_lag_fmu.py), wired to our controller by docs/ci/lag_loop.toml in a user's

@@ -1,6 +1,6 @@
 """harness/scenario.py: the scenario schema (one declaration table), parsing, the record's memory limit.
 
-Issue 23, item 1: a misspelt key or table in a scenario file used to be ignored (a run on the plant's
+A misspelt key or table in a scenario file used to be ignored (a run on the plant's
 defaults, exit 0); every mistake is now one line naming the file, the table and the key, exit 2.
 Every key misspelt and every value of the wrong type, through the command line: tests/test_cli.py.
 """
@@ -132,7 +132,7 @@ def test_the_record_must_fit_in_memory():
 
 
 def test_a_stop_too_long_for_memory_is_one_line_naming_the_limit(capsys):
-    """Issue 23, item 3: --stop 1e9 was numpy's 'Unable to allocate 218. TiB'."""
+    """--stop 1e9 was once numpy's 'Unable to allocate 218. TiB'."""
     assert cli_main(["run", "pendulum_case1", "--stop", "1e9"]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "Unable to allocate" not in err, err

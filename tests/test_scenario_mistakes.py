@@ -98,7 +98,7 @@ BAD_FMU_FILES = [  # (what, make(path), the error's tail after "[components.refe
 
 @pytest.mark.parametrize("what,make,tail", BAD_FMU_FILES, ids=[case[0] for case in BAD_FMU_FILES])
 def test_a_file_that_is_not_an_fmu_is_named_with_what_it_is(fmu_paths, tmp_path, capsys, what, make, tail):
-    """Issue 23, item 3: these gave "File is not a zip file" or a raw KeyError."""
+    """These once gave "File is not a zip file" or a raw KeyError."""
     make(tmp_path / "bad.fmu")
     path = edited_scenario(tmp_path, lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "bad.fmu"'))
     assert cli_main(["run", str(path), "--stop", "0.01"]) == 2, what

@@ -42,7 +42,7 @@ def test_settling_time_edge_cases():
 
 
 def test_whether_a_score_is_defined_is_decided_in_one_place():
-    """Issue 23, item 2: es1, es2 need one reference period; ts may be 'not settled'; never a number instead."""
+    """es1, es2 need one reference period; ts may be 'not settled'; never a number instead."""
     assert scores.undefined_reason("es1_pct", 0.0, 2 * math.pi) is None
     assert scores.undefined_reason("es2_pct", 0.0, 6.0) == (
         "the horizon 6 s is shorter than the reference period, 2 pi s, over which es1 and es2 are taken")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from fmu_src import chatter_monitor
 from harness import scenario as scenarios
 from harness import variants
 from harness.studies import step_study
@@ -220,8 +221,6 @@ def test_runs_are_scored_on_the_true_tracking_error(fmu_paths):
 
 
 def test_the_chatter_warning_names_the_jacobi_steps_of_the_study(committed):
-    sys.path.insert(0, str(ROOT / "fmu_src"))
-    import chatter_monitor
 
     families = {"the paper's pendulum scenarios": PENDULUM, "the manipulator": ("manipulator",)}
     for family, names in families.items():

@@ -1,4 +1,4 @@
-"""Parameter sweeps (issue 9): grids, validation, local pool vs Dask, streaming, kill and resume, heat map."""
+"""Parameter sweeps: grids, validation, local pool vs Dask, streaming, kill and resume, heat map."""
 import csv
 import math
 import os
@@ -100,7 +100,7 @@ def test_local_pool_sweep_records_every_point_with_scores_or_a_reason(fmu_paths,
     assert all(statuses[(c, m, "300.0")] == "ok" for c in ("vud", "fixed", "fae") for m in ("0.1", "1.0"))
     assert all(statuses[(c, "0.1", "300000.0")] == "diverged" for c in ("vud", "fixed", "fae"))
     for key, cells in rows.items():
-        if cells[-2] == "ok":  # on 0.5 s: es1, es2 not defined, ts not settled (issue 23): empty, not numbers
+        if cells[-2] == "ok":  # on 0.5 s: es1, es2 not defined, ts not settled: empty, not numbers
             assert all(math.isfinite(float(v)) for v in cells[6:11]) and cells[-1] == ""
             assert cells[4:6] == ["", ""] and (cells[3] == "" or math.isfinite(float(cells[3])))
         else:

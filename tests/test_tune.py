@@ -127,17 +127,18 @@ def test_the_hurwitz_fraction_gives_exactly_the_hurwitz_gains(order):
 
 
 def test_the_search_ranges_reach_neither_the_model_description_nor_the_c_tables(monkeypatch):
-    import build_native
+    from native_build.description import fmi2_description
+    from native_build.header import variables_header
 
     cls = build_fmu.model_class(CONTROLLER)
-    with_ranges_xml = build_native.fmi2_description(CONTROLLER, "{guid}")
-    with_ranges_header = build_native.variables_header(CONTROLLER, "{guid}")
+    with_ranges_xml = fmi2_description(CONTROLLER, "{guid}")
+    with_ranges_header = variables_header(CONTROLLER, "{guid}")
     assert sum(v.tuning is not None for v in cls.VARIABLES) >= 14
     monkeypatch.setattr(cls, "VARIABLES", tuple(dataclasses.replace(v, tuning=None) for v in cls.VARIABLES))
     from xml.etree import ElementTree as ET
 
-    assert ET.tostring(build_native.fmi2_description(CONTROLLER, "{guid}")) == ET.tostring(with_ranges_xml)
-    assert build_native.variables_header(CONTROLLER, "{guid}") == with_ranges_header
+    assert ET.tostring(fmi2_description(CONTROLLER, "{guid}")) == ET.tostring(with_ranges_xml)
+    assert variables_header(CONTROLLER, "{guid}") == with_ranges_header
 
 
 @pytest.mark.parametrize("name", scenarios.scenario_names())

@@ -245,7 +245,7 @@ def load_tbb():
 def import_ecospy():
     load_tbb()
     try:
-        import ecospy  # here, not at module level: it loads only after load_tbb() (and is 0.2 s of import)
+        import ecospy  # here, not at module level: it loads only after load_tbb()
     except ImportError as error:
         raise EngineUnavailable(f"Ecos needs ecospy, in the hosts extra: pip install -e '.[hosts]' ({error})") from error
     return ecospy

@@ -48,6 +48,7 @@ from fmpy.cross_check.validate_vendor_repo import (read_csv, validate_cross_chec
 import build_fmu
 import build_native
 import fmu_catalog
+from native_build import ls_ref
 
 from .. import cli_args
 from .. import scenario as scenarios
@@ -158,6 +159,22 @@ def closed_loop_experiments(models, fmu_paths: dict) -> dict:
     return experiments
 
 
+def ls_ref_experiment(experiment: Experiment) -> ls_ref.Experiment:
+    """The experiment as every FMU carries it (FMI-LS-REF): the same grid, signals and _in.csv text."""
+    stimuli = ls_ref.csv_text(["time", *experiment.inputs], experiment.input_table)
+    return ls_ref.Experiment(experiment.model, experiment.scenario, experiment.instance, experiment.start,
+                             experiment.step, experiment.steps, experiment.inputs, experiment.outputs, stimuli)
+
+
+def write_ls_ref_experiments(models=None) -> list:
+    """Store every FMU's experiment where the builds read it (native_build/ls_ref_experiments/)."""
+    models = list(models or [row.model_identifier for row in fmu_catalog.FMUS])
+    experiments = closed_loop_experiments(models, build_fmu.ensure_built(edition="python"))
+    stored = [ls_ref_experiment(experiments[model]) for model in models]
+    ls_ref.write(stored)
+    return stored
+
+
 # --------------------------------------------------------------- references
 def replay(fmu_path: Path, experiment: Experiment, table: np.ndarray | None = None,
            outputs_with: str = "previous") -> np.ndarray:
@@ -222,10 +239,7 @@ def held(table: np.ndarray) -> np.ndarray:
 
 def write_csv(path: Path, names, table: np.ndarray):
     """A cross-check CSV: quoted names, time first, numbers as the shortest text that reads back exactly."""
-    with open(path, "w") as stream:
-        stream.write(",".join(f'"{name}"' for name in names) + "\n")
-        for row in table:
-            stream.write(",".join(repr(float(value)) for value in row) + "\n")
+    Path(path).write_bytes(ls_ref.csv_text(names, table))
 
 
 # ------------------------------------------------------------------ entries
@@ -277,7 +291,7 @@ def readme(entry: Entry, reference_rows: int) -> str:
     edition = ("the reference edition, built with pythonfmu 0.7: the host needs Python 3 with the packages "
                "of afc-fmi's pyproject.toml (a host that is not Python preloads libpython)"
                if entry.edition == "python" else
-               "the native C edition: no Python needed (binaries for linux64, win64, darwin64)")
+               "the native C edition: no Python needed (binaries for linux64, win64, darwin64, aarch64-linux)")
     replay_text = ("at t_k the inputs of row k of the _in.csv, doStep from t_k to t_k+1, the outputs read at t_k+1 "
                    "(as fmpy and the FMU Compliance Checker replay an input file)")
     lines = [f"# {e.model}: {description}", "",
@@ -500,6 +514,11 @@ def compat_command(args) -> int:
     if any(e != "python" for e in editions) and not build_native.compiler_available():
         raise cli_args.UsageError("the native edition needs zig's C compiler: pip install -e '.[native]' "
                                   "(or --edition python)")
+    if args.ls_ref_experiments:
+        stored = write_ls_ref_experiments(args.fmu)
+        print(f"wrote the FMI-LS-REF experiments of {', '.join(e.model for e in stored)} to "
+              f"{ls_ref.EXPERIMENTS.relative_to(ls_ref.ROOT)}/ (rebuild the FMUs to embed them)")
+        return 0
     out = Path(args.out)
     cli_args.refuse_tracked([out])
     if out.exists() and any(out.iterdir()) and not (out / "compat.json").exists():
@@ -535,4 +554,7 @@ def register(commands):
     parser.add_argument("--fmu", nargs="+", choices=[row.model_identifier for row in fmu_catalog.FMUS],
                         help="only these FMUs (default: every FMU)")
     parser.add_argument("--jobs", type=cli_args.positive_int, help="fmpy processes at once (default: every core)")
+    parser.add_argument("--ls-ref-experiments", action="store_true",
+                        help="only store the FMUs' experiments where the builds embed them as FMI-LS-REF "
+                             "(native_build/ls_ref_experiments/)")
     parser.set_defaults(handler=compat_command)

@@ -44,8 +44,8 @@ CONTROLLER_TESTS = ("tests/test_adaptive_law_fmu.py", "tests/test_independent_lo
                     "tests/test_afc_math.py", "tests/test_adaptive_fuzzy_controller_fmu.py")
 PLANT_TESTS = ("tests/test_plants.py", "tests/test_independent_loop.py")
 REFERENCE_TESTS = ("tests/test_plants.py", "tests/test_independent_loop.py")
-GENERAL_TESTS = ("tests/test_general_order.py", "tests/test_afc_math.py")  # order n, m sets (issue 17)
-MOTOR_TESTS = ("tests/test_dc_motor_arm.py",)  # the third-order plant and its closed loop (issue 17)
+GENERAL_TESTS = ("tests/test_general_order.py", "tests/test_afc_math.py")  # order n, m sets (docs/general_order.md)
+MOTOR_TESTS = ("tests/test_dc_motor_arm.py",)  # the third-order plant and its closed loop
 TIMEOUT_S = 600
 SKIPPED_IN_COPY = {".git", ".venv", "build", "results", "__pycache__", ".pytest_cache"}
 
@@ -120,7 +120,7 @@ MUTATIONS = (
       "state[LATCHED + i] = state[LATCHED + n + i] = state[LATCHED + 2 * n + i] = float(sample[i])",
       "state[LATCHED + i] = state[LATCHED + n + i] = state[LATCHED + 2 * n + i] = float(sample[0])",
       CONTROLLER_TESTS, "de(0) latched as e(0) (Remark 3)"),
-    # --- the general controller: n inputs, m sets (issue 17)
+    # --- the general controller: n inputs, m sets (docs/general_order.md)
     M("membership_middle_sign", "fmu_src/afc_math.py", "memberships", "result.append(previous - rising)",
       "result.append(rising - previous)", GENERAL_TESTS, "middle sets sig(c_l) - sig(c_(l-1)): negative"),
     M("boundaries_spacing", "fmu_src/afc_math.py", "membership_boundaries", "-universe + 2.0 * universe * l / sets",
@@ -131,27 +131,27 @@ MUTATIONS = (
       "values = [values[j + 1] - lambda_e * values[j]", "values = [values[j + 1] + lambda_e * values[j]",
       GENERAL_TESTS, "r_i = r_(i-1)' + lambda r_(i-1): E^(i)(t0) != 0 for n >= 3 (36)"),
     # --- the plants and the reference (plants/)
-    M("pendulum_denominator_sign", "plants/inverted_pendulum_model.py", "pendulum_derivative",
+    M("pendulum_denominator_sign", "plants/inverted_pendulum/model.py", "pendulum_derivative",
       "FOUR_THIRDS - mp_over_mt * c * c", "FOUR_THIRDS + mp_over_mt * c * c", PLANT_TESTS,
       "den = lp (4/3 + mp cos^2 x1 / (mc + mp)) (37)"),
-    M("pendulum_centripetal_sign", "plants/inverted_pendulum_model.py", "pendulum_derivative",
+    M("pendulum_centripetal_sign", "plants/inverted_pendulum/model.py", "pendulum_derivative",
       "gv * s - mp_lp_over_mt * x2 * x2 * c * s", "gv * s + mp_lp_over_mt * x2 * x2 * c * s", PLANT_TESTS,
       "sign of the mp lp x2^2 cos sin term (37)"),
-    M("pendulum_input_gain", "plants/inverted_pendulum_model.py", "pendulum_derivative", "c * inv_mt * u",
+    M("pendulum_input_gain", "plants/inverted_pendulum/model.py", "pendulum_derivative", "c * inv_mt * u",
       "inv_mt * u", PLANT_TESTS, "input gain without cos x1 (37)"),
-    M("pendulum_params_factor", "plants/inverted_pendulum_model.py", "pendulum_params", "mp * lp / mt",
+    M("pendulum_params_factor", "plants/inverted_pendulum/model.py", "pendulum_params", "mp * lp / mt",
       "mp / mt", PLANT_TESTS, "mp lp / (mc + mp) without lp (37)"),
-    M("pendulum_disturbance_frequency", "plants/inverted_pendulum_model.py", "pendulum_derivative",
+    M("pendulum_disturbance_frequency", "plants/inverted_pendulum/model.py", "pendulum_derivative",
       "3.0 * _cos(2.0 * t)", "3.0 * _cos(t)", PLANT_TESTS, "d(t) = 3 cos t + ... instead of 3 cos 2t"),
-    M("manipulator_coulomb_sign", "plants/manipulator_model.py", "manipulator_derivative", "torque -= cr",
+    M("manipulator_coulomb_sign", "plants/manipulator/model.py", "manipulator_derivative", "torque -= cr",
       "torque += cr", PLANT_TESTS, "Coulomb friction pushes instead of opposing (39)"),
-    M("manipulator_gravity_cos", "plants/manipulator_model.py", "manipulator_derivative",
+    M("manipulator_gravity_cos", "plants/manipulator/model.py", "manipulator_derivative",
       "mr * gv_lr * _cos(x1)", "mr * gv_lr * _sin(x1)", PLANT_TESTS, "gravity torque with sin x1 (38)"),
-    M("manipulator_damping_sign", "plants/manipulator_model.py", "manipulator_derivative",
+    M("manipulator_damping_sign", "plants/manipulator/model.py", "manipulator_derivative",
       "u - dr_plus_vr * x2", "u + dr_plus_vr * x2", PLANT_TESTS, "damping and viscous friction sign (38, 39)"),
-    M("manipulator_payload_sign", "plants/manipulator_model.py", "manipulator_derivative", "mr0 + mr1 * _sin(t)",
+    M("manipulator_payload_sign", "plants/manipulator/model.py", "manipulator_derivative", "mr0 + mr1 * _sin(t)",
       "mr0 - mr1 * _sin(t)", PLANT_TESTS, "payload 5 - 4 sin t (39)"),
-    M("manipulator_inertia_factor", "plants/manipulator_model.py", "manipulator_params",
+    M("manipulator_inertia_factor", "plants/manipulator/model.py", "manipulator_params",
       "INERTIA_COEFFICIENT * lr * lr", "INERTIA_COEFFICIENT * lr", PLANT_TESTS, "J = 1.33 mr lr (39)"),
     M("rk4_weights_x1", "plants/plant_integration.py", "rk4_advance", "sixth * (a1 + 2.0 * (a2 + a3) + a4)",
       "sixth * (2.0 * a1 + (a2 + a3) + 2.0 * a4)", PLANT_TESTS, "RK4 weights (1, 2, 2, 1) -> (2, 1, 1, 2) in x1"),
@@ -165,20 +165,20 @@ MUTATIONS = (
       "math.ceil(step_size / max_internal_step - SPLIT_TOLERANCE)",
       "math.floor(step_size / max_internal_step - SPLIT_TOLERANCE)", PLANT_TESTS,
       "internal steps larger than max_internal_step"),
-    M("friction_output_sign", "plants/manipulator_model.py", "manipulator_friction", "-(sgn(x2) * cr + vr * x2)",
+    M("friction_output_sign", "plants/manipulator/model.py", "manipulator_friction", "-(sgn(x2) * cr + vr * x2)",
       "-(sgn(x2) * cr - vr * x2)", PLANT_TESTS, "the d output's viscous term (39)"),
-    M("reference_phase_omega", "plants/tracking_reference_fmu.py", "compute_outputs", "phase = omega * self.time",
+    M("reference_phase_omega", "plants/tracking_reference/fmu.py", "compute_outputs", "phase = omega * self.time",
       "phase = self.time", REFERENCE_TESTS, "ym = A sin t whatever omega"),
-    M("reference_derivative_omega", "plants/tracking_reference_fmu.py", "compute_outputs",
+    M("reference_derivative_omega", "plants/tracking_reference/fmu.py", "compute_outputs",
       "dym = amplitude * omega * _cos(phase)", "dym = amplitude * _cos(phase)", REFERENCE_TESTS,
       "dym without omega"),
-    M("reference_error_sign", "plants/tracking_reference_fmu.py", "compute_outputs", "self.de = dym - self.dy",
+    M("reference_error_sign", "plants/tracking_reference/fmu.py", "compute_outputs", "self.de = dym - self.dy",
       "self.de = self.dy - dym", REFERENCE_TESTS, "de = dy - dym"),
-    M("reference_acceleration_sign", "plants/tracking_reference_fmu.py", "compute_outputs",
+    M("reference_acceleration_sign", "plants/tracking_reference/fmu.py", "compute_outputs",
       "-amplitude * omega * omega * s", "amplitude * omega * omega * s", REFERENCE_TESTS, "ddym sign"),
-    M("reference_d2e_sign", "plants/tracking_reference_fmu.py", "compute_outputs", "self.d2e = ddym - self.d2y",
+    M("reference_d2e_sign", "plants/tracking_reference/fmu.py", "compute_outputs", "self.d2e = ddym - self.d2y",
       "self.d2e = self.d2y - ddym", MOTOR_TESTS, "d2e = d2y - ddym"),
-    M("motor_back_emf_sign", "plants/dc_motor_arm_model.py", "motor_arm_derivative",
+    M("motor_back_emf_sign", "plants/dc_motor_arm/model.py", "motor_arm_derivative",
       "(u - resistance * x3 - ke * x2) * inv_l", "(u - resistance * x3 + ke * x2) * inv_l", MOTOR_TESTS,
       "back-emf adds to the armature voltage"),
     M("rk4_states_weights", "plants/plant_integration.py", "rk4_advance_states", "sixth * (b1 + 2.0 * (b2 + b3) + b4)",

@@ -6,7 +6,7 @@ t_n the outputs are evaluated (feedthrough: in dependency order; jacobi:
 from the inputs set at the previous point), then the controller integrates
 theta with ``theta += h * dtheta(t_n)`` and the plant integrates with
 fixed-step RK4 while u is held.  It calls the same pure functions the FMUs
-run (``fmu_src.afc_math``, ``plants.*_model``, ``plants.plant_integration``),
+run (``fmu_src.afc_math``, ``plants.<name>.model``, ``plants.plant_integration``),
 so co-simulation and oracle must agree to rounding.
 """
 from __future__ import annotations

@@ -309,7 +309,7 @@ class SignalComparison:
 def compare_signal(name, x_ref, y_ref, x_test, y_test, tolerances: dict | None = None,
                    keep_funnel: bool = False) -> SignalComparison:
     """Tube comparison of one signal with pyfunnel (reference and test must span the same x range)."""
-    import pyfunnel  # here, not at module level: 0.2 s of import, paid only when signals are compared
+    import pyfunnel  # here, not at module level: its import is paid only when signals are compared
 
     tolerances = {**DEFAULT_TOLERANCES, **(tolerances or {})}
     x_ref, y_ref = np.asarray(x_ref, float), np.asarray(y_ref, float)

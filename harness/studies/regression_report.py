@@ -55,7 +55,7 @@ def slowness(comparison) -> str:
 def plot_signal(path: Path, case, comparison, reference, run):
     """Reference, tube and new result over the whole horizon, a zoom around the worst point, and the
     excursion outside the tube; the largest excursion is marked on all three."""
-    import matplotlib  # here, not at module level: 1-3 s of import, paid only when a failing signal is drawn
+    import matplotlib  # here, not at module level: a heavy import, paid only when a failing signal is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -1,4 +1,4 @@
-"""Parameter sweeps: ``python -m harness sweep SCENARIO --grid NAME=START:STOP:N ...`` (issue 9).
+"""Parameter sweeps: ``python -m harness sweep SCENARIO --grid NAME=START:STOP:N ...``.
 
 The cartesian product of the grids (any parameter of any instance, or the
 communication ``step`` / the ``stop`` time) times the chosen controllers,

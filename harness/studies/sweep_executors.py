@@ -130,7 +130,7 @@ class DaskPool:
 
     def __init__(self, address: str, plan: SweepPlan):
         try:
-            from distributed import Client  # optional: the cluster extra; 1-3 s of import
+            from distributed import Client  # optional: the cluster extra, and a heavy import
         except ImportError:
             raise ScenarioError("--scheduler needs dask.distributed, in the cluster extra: pip install -e '.[cluster]' "
                                 "(or pip install 'dask[distributed]')") from None

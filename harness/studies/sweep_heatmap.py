@@ -39,7 +39,7 @@ def heatmap_arrays(plan: SweepPlan, rows: list, controller: str):
 
 
 def plot_heatmap(plan: SweepPlan, rows: list, path) -> Path:
-    import matplotlib  # here, not at module level: 1-3 s of import, paid only when a heat map is drawn
+    import matplotlib  # here, not at module level: a heavy import, paid only when a heat map is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -130,7 +130,7 @@ def verdicts(study: dict) -> dict:
 
 
 def figure(study: dict, path: Path) -> Path:
-    import matplotlib  # here, not at module level: 1-3 s of import, paid only when the figure is drawn
+    import matplotlib  # here, not at module level: a heavy import, paid only when the figure is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

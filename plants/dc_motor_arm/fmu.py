@@ -13,11 +13,14 @@ Co-simulation semantics (as the other plants):
 * doStep(t, h) holds u over [t, t + h] and integrates with classical RK4 in
   ceil(h / max_internal_step) equal internal steps.
 """
-import dc_motor_arm_model as model
-from afc_slave_base import INPUT, OUTPUT, Variable, finite, non_negative, positive
+import math
+
+from fmu_src.afc_declaration import Derivative, ModelExchange, TestDrive
+from fmu_src.afc_slave_base import INPUT, OUTPUT, Variable, finite, non_negative, positive
 # pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
 # so the plants' shared base class is imported under that name.
-from rk4_plant_slave import RK4PlantSlave as Fmi2Slave
+from plants.rk4_plant_slave import RK4PlantSlave as Fmi2Slave
+from plants.dc_motor_arm import model
 
 VARIABLES = (
     positive("J", 0.5, "kg.m2", "inertia at the motor shaft (motor and arm)"),
@@ -40,6 +43,24 @@ VARIABLES = (
              initial_depends_on=("J", "b", "m", "lc", "gv", "Kt", "x1_start", "x2_start", "x3_start")),
     Variable("i", OUTPUT, 0.0, "A", "armature current x3", initial_depends_on=("x3_start",)),
 )
+
+
+# beside the table (fmu_src/afc_declaration.py), built when asked: pythonfmu runs this script again at
+# every instantiate
+def model_exchange() -> ModelExchange:
+    """The Model Exchange interface of the native edition (docs/model_exchange.md)."""
+    return ModelExchange(
+        derivatives=(Derivative("y", (("dy", "constant"),), (), "dx1 = x2"),
+                     Derivative("dy", (("y", "dependent"), ("dy", "fixed"), ("i", "fixed")),
+                                ("J", "b", "m", "lc", "gv", "Kt"), "dx2 = (Kt x3 - b x2 - m gv lc sin x1) / J"),
+                     Derivative("i", (("dy", "fixed"), ("i", "fixed"), ("u", "fixed")), ("Ke", "R", "L"),
+                                "dx3 = (u - R x3 - Ke x2) / L")),
+        output_states=(("d2y", (("y", "dependent"), ("dy", "fixed"), ("i", "fixed"))),))
+
+
+def test_drive() -> TestDrive:
+    """How the tests drive this FMU."""
+    return TestDrive({}, lambda t: {"u": 5.0 * math.cos(t)}, 1e-3)
 
 
 class DcMotorArm(Fmi2Slave):

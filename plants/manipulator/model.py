@@ -210,3 +210,16 @@ def manipulator_event_indicators(t: float, x1: float, x2: float, u: float, param
     if mode == STICK:
         return ZERO_VELOCITY, cr - abs(manipulator_applied_torque(t, x1, u, params))
     return mode * x2 + ZERO_VELOCITY, cr
+
+
+def oracle(p: dict) -> tuple:
+    """(derivative, params, extra) of the oracle (harness/studies/oracle.py) for the FMU's parameters
+    ``p``: extra(t, x1, x2) gives the outputs beyond y, dy."""
+    params = manipulator_params(p["gv"], p["lr"], p["dr"], p["cr"], p["vr"], p["mr0"], p["mr1"])
+
+    def extra(t, x1, x2):
+        mr = manipulator_payload(t, p["mr0"], p["mr1"])
+        inertia = manipulator_inertia(mr, p["lr"])
+        return {"plant.d": manipulator_friction(x2, inertia, p["cr"], p["vr"]), "plant.mr": mr}
+
+    return manipulator_derivative, params, extra

@@ -69,3 +69,14 @@ def pendulum_derivative(t: float, x1: float, x2: float, u: float, params: tuple)
     if dist_gain != 0.0:  # d(t), docs/model.md section 10, choice 10 (disturbance): additive in dx2
         dx2 += dist_gain * (3.0 * _cos(2.0 * t) + 2.0 * _sin((0.09 * t + 1.0) * t))
     return x2, dx2
+
+
+def oracle(p: dict) -> tuple:
+    """(derivative, params, extra) of the oracle (harness/studies/oracle.py) for the FMU's parameters
+    ``p``: extra(t, x1, x2) gives the outputs beyond y, dy."""
+    params = pendulum_params(p["gv"], p["mc"], p["mp"], p["lp"], p["dist_gain"])
+
+    def extra(t, x1, x2):
+        return {"plant.d": pendulum_disturbance(t, p["dist_gain"])}
+
+    return pendulum_derivative, params, extra

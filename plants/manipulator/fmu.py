@@ -19,11 +19,12 @@ Co-simulation semantics:
 """
 import math
 
-import manipulator_model as model
-from afc_slave_base import INPUT, OUTPUT, Variable, finite, non_negative, positive
+from fmu_src.afc_declaration import Derivative, EventIndicator, ModelExchange, TestDrive
+from fmu_src.afc_slave_base import INPUT, OUTPUT, Variable, finite, non_negative, positive
 # pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
 # so the plants' shared base class is imported under that name.
-from rk4_plant_slave import RK4PlantSlave as Fmi2Slave
+from plants.rk4_plant_slave import RK4PlantSlave as Fmi2Slave
+from plants.manipulator import model
 
 VARIABLES = (
     positive("gv", 9.8, "m/s2", "gravitational acceleration"),
@@ -43,6 +44,35 @@ VARIABLES = (
              initial_depends_on=("lr", "cr", "vr", "mr0", "mr1", "x2_start")),
     Variable("mr", OUTPUT, 5.0, "kg", "payload mass mr(t) = mr0 + mr1 sin t", initial_depends_on=("mr0", "mr1")),
 )
+
+
+# beside the table (fmu_src/afc_declaration.py), built when asked: pythonfmu runs this script again at
+# every instantiate
+def model_exchange() -> ModelExchange:
+    """The Model Exchange interface of the native edition (docs/model_exchange.md)."""
+    return ModelExchange(
+        derivatives=(Derivative("y", (("dy", "constant"),), (), "dx1 = x2 (38)"),
+                     Derivative("dy", (("y", "dependent"), ("dy", "dependent"), ("u", "dependent")),
+                                ("gv", "lr", "dr", "cr", "vr", "mr0", "mr1"),
+                                "dx2 of (38, 39) in the friction mode (0 while stuck)")),
+        output_states=(("d", (("dy", "dependent"),)),),
+        event_indicators=(
+            EventIndicator("z_slip", "slip indicator: friction_mode x2 + 1e-10 rad/s while slipping (zero when "
+                                     "the link comes to rest), 1e-10 while stuck", (("dy", "discrete"),)),
+            EventIndicator("z_stick", "stick indicator: cr while slipping; cr - |u - mr gv lr cos x1| while "
+                                      "stuck (zero at break-away)", (("y", "dependent"), ("u", "dependent")))),
+        locals=(("friction_mode", "Model Exchange friction mode: 1 slipping forwards, -1 backwards, 0 stuck "
+                                  "(co-simulation: sgn(x2))"),),
+        reinit=("dy",))
+
+
+def test_drive() -> TestDrive:
+    """How the tests drive this FMU."""
+    # the arm slides, sticks at t ~ 2 ms and breaks away when u jumps at 7 ms; mr1 < mr0 is the rule
+    # the valid ranges alone do not state
+    return TestDrive(dict(mr0=0.2, mr1=0.0, x1_start=math.pi / 2, x2_start=0.2),
+                     lambda t: {"u": 0.7 if t < 0.007 - 1e-12 else -2.0}, 1e-4,
+                     cross_parameter_violations=(("mr1", 5.0, {}), ("mr1", 7.0, {}), ("mr1", 3.0, {"mr0": 3.0})))
 
 
 class Manipulator(Fmi2Slave):

@@ -16,11 +16,12 @@ Co-simulation semantics:
 """
 import math
 
-import inverted_pendulum_model as model
-from afc_slave_base import INPUT, OUTPUT, Variable, finite, positive
+from fmu_src.afc_declaration import Derivative, ModelExchange, TestDrive
+from fmu_src.afc_slave_base import INPUT, OUTPUT, Variable, finite, positive
 # pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
 # so the plants' shared base class is imported under that name.
-from rk4_plant_slave import RK4PlantSlave as Fmi2Slave
+from plants.rk4_plant_slave import RK4PlantSlave as Fmi2Slave
+from plants.inverted_pendulum import model
 
 VARIABLES = (
     positive("gv", 9.8, "m/s2", "gravitational acceleration"),
@@ -37,6 +38,21 @@ VARIABLES = (
     Variable("dy", OUTPUT, 0.0, "rad/s", "pole rate x2", initial_depends_on=("x2_start",)),
     Variable("d", OUTPUT, 0.0, "rad/s2", "disturbance d(t) added to dx2", initial_depends_on=("dist_gain",)),
 )
+
+
+# beside the table (fmu_src/afc_declaration.py), built when asked: pythonfmu runs this script again at
+# every instantiate
+def model_exchange() -> ModelExchange:
+    """The Model Exchange interface of the native edition (docs/model_exchange.md)."""
+    return ModelExchange(
+        derivatives=(Derivative("y", (("dy", "constant"),), (), "dx1 = x2 (37)"),
+                     Derivative("dy", (("y", "dependent"), ("dy", "dependent"), ("u", "dependent")),
+                                ("gv", "mc", "mp", "lp", "dist_gain"), "dx2 of (37) with d(t)")))
+
+
+def test_drive() -> TestDrive:
+    """How the tests drive this FMU."""
+    return TestDrive(dict(dist_gain=1.0), lambda t: {"u": math.sin(3 * t)}, 1e-3)
 
 
 class InvertedPendulum(Fmi2Slave):

@@ -20,8 +20,9 @@ import math
 
 # pythonfmu's C loader finds the model class by the pattern "class X(Fmi2Slave):",
 # so the project's base class is imported under that name.
-from afc_slave_base import INPUT, OUTPUT, Variable, finite, positive
-from afc_slave_base import TableSlave as Fmi2Slave
+from fmu_src.afc_declaration import ModelExchange, TestDrive
+from fmu_src.afc_slave_base import INPUT, OUTPUT, Variable, finite, positive
+from fmu_src.afc_slave_base import TableSlave as Fmi2Slave
 
 _sin = math.sin
 _cos = math.cos
@@ -47,6 +48,19 @@ VARIABLES = (
     Variable("d2e", OUTPUT, 0.0, "rad/s2", "tracking error acceleration d2e = ddym - d2y",
              depends_on=("d2y",), dependency_kinds=("constant",), initial_depends_on=(*REFERENCE_PARAMETERS, "d2y")),
 )
+
+
+# beside the table (fmu_src/afc_declaration.py), built when asked: pythonfmu runs this script again at
+# every instantiate
+def model_exchange() -> ModelExchange:
+    """The Model Exchange interface of the native edition (docs/model_exchange.md)."""
+    # no continuous state: the outputs follow the host's time
+    return ModelExchange()
+
+
+def test_drive() -> TestDrive:
+    """How the tests drive this FMU."""
+    return TestDrive({}, lambda t: {"y": 0.1 * t, "dy": 0.1}, 1e-3)
 
 
 class TrackingReference(Fmi2Slave):

@@ -1,5 +1,5 @@
 /* DcMotorArm: an arm driven by a DC motor with armature inductance, a third-order plant of
- * our own (issue 17, docs/general_order.md), as a native FMU: the C twin of
+ * our own (docs/general_order.md), as a native FMU: the C twin of
  * dc_motor_arm_model.py and dc_motor_arm_fmu.py.
  *
  *   dx1 = x2

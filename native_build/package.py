@@ -1,0 +1,80 @@
+"""The FMU archives: modelDescription.xml, the sources, one binary per platform folder (a fat
+Mach-O for FMI 2.0's darwin64), the FMI-LS-REF files, zipped reproducibly and written atomically."""
+from __future__ import annotations
+
+import io
+import os
+import struct
+import tempfile
+import zipfile
+from pathlib import Path
+
+import fmu_catalog
+from native_build import LAYER, ls_ref
+
+
+def atomic_write(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(data)
+        fmu_catalog.ordinary_file_mode(temporary)
+        os.replace(temporary, path)
+    except BaseException:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
+        raise
+
+
+
+def fat_macho(binaries: list[bytes]) -> bytes:
+    """A universal (fat) Mach-O file holding the given thin binaries (what lipo -create does)."""
+    alignment = 14  # 2^14: the page size of arm64 macOS
+    header = struct.pack(">II", 0xCAFEBABE, len(binaries))
+    offset = 1 << alignment
+    entries, payload = b"", b""
+    for binary in binaries:
+        cpu_type, cpu_subtype = struct.unpack("<ii", binary[4:12])
+        entries += struct.pack(">iiIII", cpu_type, cpu_subtype & 0x00FFFFFF, offset, len(binary), alignment)
+        padded = binary + b"\0" * (-len(binary) % (1 << alignment))
+        payload += padded
+        offset += len(padded)
+    head = header + entries
+    return head + b"\0" * ((1 << alignment) - len(head)) + payload
+
+
+
+def zip_archive(files: dict[str, bytes]) -> bytes:
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name in sorted(files):
+            info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            archive.writestr(info, files[name])
+    return buffer.getvalue()
+
+
+
+def fmu_files(model: fmu_catalog.FmuSource, descriptions: dict[int, bytes], header: Path, binaries: dict,
+              targets, generated: dict[int, dict[str, bytes]] | None = None) -> dict[int, dict[str, bytes]]:
+    """{FMI version: {archive path: bytes}}: the description, the sources (the layer, the model's C
+    files, its generated header), each target's binary (``binaries[(version, target)]``), the
+    ``generated`` files of each version (native_build.sources: what compiles the sources) and, where
+    the FMU runs on this machine, its FMI-LS-REF files."""
+    name = model.model_identifier
+    sources = {f"sources/{fmu_catalog.archive_name(p)}": p.read_bytes() for p in (*LAYER, *model.c_sources, *model.c_headers, header)}
+    files = {version: {"modelDescription.xml": descriptions[version], **sources,
+                       **(generated or {}).get(version, {})} for version in (2, 3)}
+    darwin = [binaries[(2, t)].read_bytes() for t in targets if t.platform == "darwin64"]
+    for target in targets:
+        if target.platform != "darwin64":
+            files[2][f"binaries/{target.platform}/{name}{target.extension}"] = binaries[(2, target)].read_bytes()
+        files[3][f"binaries/{target.fmi3_folder}/{name}{target.extension}"] = binaries[(3, target)].read_bytes()
+    if darwin:
+        files[2][f"binaries/darwin64/{name}.dylib"] = fat_macho(darwin)
+    for version in (2, 3):  # FMI-LS-REF: the reference is this machine's run of the FMU (native_build.ls_ref)
+        if ls_ref.runs_here(files[version], version):
+            files[version].update(ls_ref.ls_ref_files(ls_ref.load(name), files[version]))
+    return files
