@@ -20,6 +20,7 @@ EVERY_TEST = "every test"
 #: functions (every parametrisation), or EVERY_TEST. Slow: a co-simulation of seconds, another process or host,
 #: a build of its own. tests/test_fast_loop.py holds every module to a fast test and every name here to a test.
 SLOW = {
+    "test_aarch64_linux.py": EVERY_TEST,
     "test_adaptive_fuzzy_controller_fmu.py": ("test_bad_parameter_fails_initialisation_naming_it",
         "test_fmpy_command_line_matches_the_pure_math", "test_fmpy_validate_finds_no_problem",),
     "test_afc_math.py": ("test_projection_keeps_theta_below_bound_under_adversarial_tau",),
@@ -109,6 +110,8 @@ SLOW = {
         "test_native_fmus_give_bit_identical_runs_with_either_loop",
         "test_progress_is_reported_at_the_same_rows_with_either_loop",
         "test_pythonfmu_fmus_give_bit_identical_runs_with_either_loop",),
+    "test_ls_ref.py": ("test_native_fmu_reproduces_its_embedded_reference",
+        "test_python_fmu_reproduces_its_embedded_reference",),
     "test_matrix.py": ("test_chattering_rows_carry_the_step_warning_and_others_do_not",
         "test_every_host_at_its_validated_step_is_within_1_percent_without_false_warning",
         "test_markdown_lists_every_row_and_says_where_warnings_come_from",
@@ -161,6 +164,8 @@ SLOW = {
         "test_per_signal_tolerances_in_the_reference_metadata_decide_each_signal",
         "test_the_html_report_shows_failing_signals_first_with_their_plots_and_every_link_resolves",
         "test_the_link_check_sees_a_missing_image",),
+    "test_source_fmus.py": ("test_fmi2_sources_rebuild_to_the_same_results",
+        "test_fmi3_build_description_rebuilds_to_the_same_results",),
     "test_step_study.py": ("test_apply_needs_the_full_study",
         "test_export_ssp_carries_the_jacobi_validated_step_unless_given",
         "test_quick_study_writes_only_into_its_output_folder", "test_run_warns_beyond_the_validated_step",
