@@ -20,6 +20,7 @@ EVERY_TEST = "every test"
 #: functions (every parametrisation), or EVERY_TEST. Slow: a co-simulation of seconds, another process or host,
 #: a build of its own. tests/test_fast_loop.py holds every module to a fast test and every name here to a test.
 SLOW = {
+    "test_wheel_contents.py": EVERY_TEST,
     "test_aarch64_linux.py": EVERY_TEST,
     "test_adaptive_fuzzy_controller_fmu.py": ("test_bad_parameter_fails_initialisation_naming_it",
         "test_fmpy_command_line_matches_the_pure_math", "test_fmpy_validate_finds_no_problem",),
