@@ -16,8 +16,9 @@ recorded, with %.17g.  The test checks
   computes what wine computes here.
 
 Wine is Debian's (``apt-get install --no-install-recommends wine64``); the test skips when it
-is absent.  It uses its own wine prefix, build/wine-prefix (695 MB, made once in about 7 s),
-unless WINEPREFIX is set.
+is absent.  It uses its own wine prefix, outside the checkout (its drive z: is a link to /, which
+a tool walking the checkout, such as setuptools collecting package data, would follow into the
+whole file system): $XDG_CACHE_HOME/afc-fmi/wine-prefix (~/.cache by default), unless WINEPREFIX is set.
 """
 import os
 import shutil
@@ -34,12 +35,11 @@ from tests.native_hosts import (CASES, FAILING_RUNS, failing_run, recorded_runs,
                                 run_with_files, scaled_difference, zig_build)
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_PREFIX = ROOT / "build" / "wine-prefix"
+DEFAULT_PREFIX = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "afc-fmi" / "wine-prefix"
 # Largest |win64 - linux64| of an output, relative to that output's largest |value| in the run.
-# Measured: at most 1.8e-14 (the pendulum case's u) from the one-ulp libm differences; a defect
-# (a wrong formula, parameter or input) is many orders above.  Per value the relative difference
-# is larger where a signal crosses zero (1.5e-11 on the manipulator's dy, 2e-18 absolute): printed,
-# not asserted.
+# The one-ulp libm differences stay orders below it (docs/native.md); a defect (a wrong formula,
+# parameter or input) is many orders above.  Per value the relative difference is larger where a
+# signal crosses zero: printed, not asserted.
 WINDOWS_TOLERANCE = 1e-12
 
 
