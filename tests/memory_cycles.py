@@ -7,7 +7,8 @@ fresh process, after a warm-up:
 * ``rss_kib``: the slope, in KiB per cycle, of a least-squares line through the resident set size,
   sampled every ``every`` cycles after ``gc.collect()`` (what a user sees; C++ allocations count too);
 * ``traced_kib``: the same slope of the memory tracemalloc traces (every Python object, exact), taken
-  after the RSS phase (tracemalloc's own tables count in the RSS);
+  after the RSS phase (tracemalloc's own tables count in the RSS) and ``traced_warm_up`` cycles
+  under tracemalloc (what the first traced cycles allocate once is left out);
 * ``by_owner``: the traced memory kept over the traced phase, per cycle, split by the traceback of
   each allocation: ``fmu_sources`` (a frame of the FMU's own Python sources: a file of its resources
   folder outside ``resources/pythonfmu``, or the FMU script that pythonfmu's wrapper runs again at
@@ -33,7 +34,8 @@ OWNERS = ("fmu_sources", "pythonfmu_python", "pythonfmu_wrapper", "host")
 TRACED_FRAMES = 12  # deep enough to reach from an allocation in numpy's Python code back to the FMU's frame
 
 
-def _measure_one(path: str, unzip_dir: str, warm_up: int, rss_cycles: int, traced_cycles: int, every: int) -> dict:
+def _measure_one(path: str, unzip_dir: str, warm_up: int, rss_cycles: int, traced_warm_up: int, traced_cycles: int,
+                 every: int) -> dict:
     """The figures of one FMU, in this process (see the module's text)."""
     import gc
     import linecache
@@ -93,6 +95,8 @@ def _measure_one(path: str, unzip_dir: str, warm_up: int, rss_cycles: int, trace
     gc.collect()
     rss = growth(rss_cycles, rss_kib)
     tracemalloc.start(TRACED_FRAMES)
+    for k in range(traced_warm_up):
+        cycle(k)
     gc.collect()
     before = tracemalloc.take_snapshot()
     traced = growth(traced_cycles, lambda: tracemalloc.get_traced_memory()[0] / 1024)
@@ -108,9 +112,10 @@ def _measure_one(path: str, unzip_dir: str, warm_up: int, rss_cycles: int, trace
             "sys_path": len(sys.path)}
 
 
-def measure(fmu_paths: dict, work_dir, warm_up: int, rss_cycles: int, traced_cycles: int, every: int) -> dict:
+def measure(fmu_paths: dict, work_dir, warm_up: int, rss_cycles: int, traced_warm_up: int, traced_cycles: int,
+            every: int) -> dict:
     """{name: figures} for each FMU of {name: path}, the FMUs in parallel, each in a fresh process."""
-    counts = (warm_up, rss_cycles, traced_cycles, every)
+    counts = (warm_up, rss_cycles, traced_warm_up, traced_cycles, every)
     processes = {name: subprocess.Popen(
         [sys.executable, __file__, "--one", str(path), str(pathlib.Path(work_dir) / name), *map(str, counts)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for name, path in fmu_paths.items()}
@@ -132,12 +137,13 @@ def main(argv=None) -> None:
     parser.add_argument("fmus", nargs="+", type=pathlib.Path)
     parser.add_argument("--warm-up", type=int, default=40)
     parser.add_argument("--rss-cycles", type=int, default=300)
+    parser.add_argument("--traced-warm-up", type=int, default=0)
     parser.add_argument("--traced-cycles", type=int, default=150)
     parser.add_argument("--every", type=int, default=10)
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as work_dir:
         measured = measure({path.stem: path.resolve() for path in args.fmus}, work_dir,
-                           args.warm_up, args.rss_cycles, args.traced_cycles, args.every)
+                           args.warm_up, args.rss_cycles, args.traced_warm_up, args.traced_cycles, args.every)
     print(json.dumps(measured, indent=1))
 
 

@@ -34,7 +34,7 @@ FMU_IDS = tuple(f.model_identifier for f in build_fmu.FMUS)
 PYTHONFMU_EXAMPLE = ROOT / "tests" / "data" / "pythonfmu_resistor.py"
 SECTION = "## Memory per instantiate/free cycle"
 
-WARM_UP, RSS_CYCLES, TRACED_CYCLES, EVERY = 40, 300, 150, 10
+WARM_UP, RSS_CYCLES, TRACED_WARM_UP, TRACED_CYCLES, EVERY = 40, 300, 50, 150, 10
 #: what our own code (a frame of the FMU's Python sources) may keep per cycle, KiB
 OURS_LIMIT_KIB = 0.5
 #: what one of our FMUs may keep in all per cycle (pythonfmu's residual for one slave class of 5 or
@@ -42,9 +42,10 @@ OURS_LIMIT_KIB = 0.5
 LIMIT_KIB = 1.5
 #: pythonfmu's example FMU keeps at least this per cycle, traced and RSS, KiB
 PYTHONFMU_EXAMPLE_AT_LEAST_KIB = 4.0
-#: how far a figure of this run may lie from the one docs/performance.md quotes for the same owner, KiB
-#: (the per-owner figures are counts of objects kept; objects from CPython's free lists move a few bytes)
-DOCS_TOLERANCE_KIB = 0.1
+#: how far a figure of this run may lie from the one docs/performance.md quotes for the same owner, KiB:
+#: the page quotes a run of 3000 cycles, this test's window is short, so what is allocated once (a
+#: table's resize, a free list's refill) weighs more in it; objects from free lists move a few bytes
+DOCS_TOLERANCE_KIB = 0.25
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +59,8 @@ def pythonfmu_example_fmu(tmp_path_factory):
 @pytest.fixture(scope="module")
 def measured(fmu_paths, pythonfmu_example_fmu, tmp_path_factory):
     fmus = {**{fmu_id: fmu_paths[fmu_id] for fmu_id in FMU_IDS}, "Resistor": pythonfmu_example_fmu}
-    return memory_cycles.measure(fmus, tmp_path_factory.mktemp("cycles"), WARM_UP, RSS_CYCLES, TRACED_CYCLES, EVERY)
+    return memory_cycles.measure(fmus, tmp_path_factory.mktemp("cycles"), WARM_UP, RSS_CYCLES, TRACED_WARM_UP,
+                                 TRACED_CYCLES, EVERY)
 
 
 def docs_figures() -> dict:
@@ -70,13 +72,13 @@ def docs_figures() -> dict:
             for line in section.splitlines() if line.startswith("|")]
     header, body = rows[0], rows[2:]
     assert header[:5] == ["FMU", "the FMU's code", "pythonfmu's wrapper", "traced, all", "RSS"], header
-    return {row[0].strip("`"): dict(zip(("fmu_sources", "pythonfmu_wrapper", "traced_kib", "rss_kib"),
+    return {re.match(r"`(\w+)`", row[0]).group(1): dict(zip(("fmu_sources", "pythonfmu_wrapper", "traced_kib", "rss_kib"),
                                         (float(re.match(r"[\d.]+", cell).group()) for cell in row[1:5])))
             for row in body}
 
 
 def test_our_code_keeps_next_to_nothing_per_cycle(measured):
-    """instantiate, initialise, terminate, free, 490 times per FMU: the memory kept by allocations of
+    """instantiate, initialise, terminate, free, 540 times per FMU: the memory kept by allocations of
     our own code (a frame of the FMU's sources) is below OURS_LIMIT_KIB per cycle."""
     ours = {fmu_id: measured[fmu_id]["by_owner"] for fmu_id in FMU_IDS}
     too_much = {fmu_id: owners for fmu_id, owners in ours.items() if not owners["fmu_sources"] < OURS_LIMIT_KIB}
