@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import pathlib
 import subprocess
 import sys
@@ -131,8 +132,10 @@ def measure(fmu_paths: dict, work_dir, warm_up: int, rss_cycles: int, traced_war
 def main(argv=None) -> None:
     if argv is None and sys.argv[1:2] == ["--one"]:
         path, unzip_dir, *counts = sys.argv[2:]
-        print(json.dumps(_measure_one(path, unzip_dir, *map(int, counts))))
-        return
+        print(json.dumps(_measure_one(path, unzip_dir, *map(int, counts))), flush=True)
+        # a pythonfmu 0.7 library without our exit handler may abort in the C++ exit handlers
+        # (docs/using_fmus.md): the figures are written, so the process ends before them
+        os._exit(0)
     parser = argparse.ArgumentParser(description="memory kept per instantiate/free cycle, per FMU")
     parser.add_argument("fmus", nargs="+", type=pathlib.Path)
     parser.add_argument("--warm-up", type=int, default=40)

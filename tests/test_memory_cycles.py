@@ -46,6 +46,8 @@ PYTHONFMU_EXAMPLE_AT_LEAST_KIB = 4.0
 #: the page quotes a run of 3000 cycles, this test's window is short, so what is allocated once (a
 #: table's resize, a free list's refill) weighs more in it; objects from free lists move a few bytes
 DOCS_TOLERANCE_KIB = 0.25
+#: ... or this share of the quoted figure, whichever is larger (pythonfmu's example keeps several KiB)
+DOCS_TOLERANCE_SHARE = 0.1
 
 
 @pytest.fixture(scope="module")
@@ -101,13 +103,14 @@ def test_life_cycles_keep_no_more_than_pythonfmus_residual(measured):
 
 def test_the_performance_page_quotes_the_figures_measured(measured):
     """docs/performance.md's table gives, per FMU, the traced memory kept per cycle by our code and by
-    pythonfmu's wrapper: this run's figures lie within DOCS_TOLERANCE_KIB of them."""
+    pythonfmu's wrapper: this run's figures lie within DOCS_TOLERANCE_KIB (or DOCS_TOLERANCE_SHARE) of them."""
     quoted = docs_figures()
     assert set(quoted) == {*FMU_IDS, "Resistor"}, sorted(quoted)
     off = {}
     for fmu_id, figures in quoted.items():
         for owner in ("fmu_sources", "pythonfmu_wrapper"):
-            if abs(measured[fmu_id]["by_owner"][owner] - figures[owner]) > DOCS_TOLERANCE_KIB:
+            tolerance = max(DOCS_TOLERANCE_KIB, DOCS_TOLERANCE_SHARE * figures[owner])
+            if abs(measured[fmu_id]["by_owner"][owner] - figures[owner]) > tolerance:
                 off[(fmu_id, owner)] = (figures[owner], measured[fmu_id]["by_owner"][owner])
     assert not off, f"docs/performance.md quotes (quoted, measured now) KiB per cycle: {off}"
 
