@@ -404,6 +404,30 @@ def test_a_killed_run_resumes_with_every_finished_trial_kept(tmp_path, edition, 
     assert sum(t.state.is_finished() and t.state != optuna.trial.TrialState.FAIL for t in after.values()) == 10
 
 
+@pytest.mark.parametrize("race", ["table studies already exists", "database is locked",
+                                  "An exception is raised during the commit. This typically happens due to invalid "
+                                  "data in the commit, e.g. exceeding max length."])
+def test_a_database_another_process_is_creating_is_opened_once_it_is_there(tmp_path, monkeypatch, race):
+    """Two processes started together both create the schema: the one that loses the race retries."""
+    real, calls = optuna.storages.RDBStorage, []
+
+    def racing(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise optuna.exceptions.StorageInternalError(race)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(optuna.storages, "RDBStorage", racing)
+    monkeypatch.setattr(storage.clock, "sleep", lambda seconds: None)
+    storage.open_storage(f"sqlite:///{tmp_path / 'x.db'}")
+    assert len(calls) == 2
+
+
+def test_a_database_that_cannot_be_opened_is_one_line(tmp_path):
+    with pytest.raises(storage.TuneError, match=r"^--storage sqlite:///.*: cannot open the database: "):
+        storage.open_storage(f"sqlite:///{tmp_path / 'missing' / 'folder' / 'x.db'}")
+
+
 def test_trials_of_dead_processes_are_failed_and_retried_those_of_live_ones_kept(tmp_path, monkeypatch):
     import socket
 

@@ -66,7 +66,9 @@ def open_storage(url: str):
             return storage
         except Exception as error:  # noqa: BLE001 - any driver's error: one line, exit 2
             text = cli_args.one_line(error)
-            racing = ("already exists", "alembic_version", "database is locked")  # another process creates it now
+            # another process creates the schema now: its tables, its version row (optuna then reports
+            # the failed commit of ours), or holds the lock
+            racing = ("already exists", "alembic_version", "database is locked", "during the commit")
             if any(word in text for word in racing) and attempt < 9:
                 clock.sleep(0.2 * (attempt + 1))
                 continue
