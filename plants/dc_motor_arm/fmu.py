@@ -1,7 +1,7 @@
 """DcMotorArm: an arm driven by a DC motor with armature inductance, a third-order plant FMU.
 
 Our own plant for the general-order controller (docs/general_order.md); the
-equations are in ``dc_motor_arm_model``, the integrator in
+equations are in ``plants.dc_motor_arm.model``, the integrator in
 ``plant_integration``; this class only adapts them to FMI.
 
 Co-simulation semantics (as the other plants):

@@ -1,6 +1,6 @@
 /* DcMotorArm: an arm driven by a DC motor with armature inductance, a third-order plant of
  * our own (docs/general_order.md), as a native FMU: the C twin of
- * dc_motor_arm_model.py and dc_motor_arm_fmu.py.
+ * model.py and fmu.py of this folder.
  *
  *   dx1 = x2
  *   dx2 = (Kt x3 - b x2 - m gv lc sin x1) / J                       (motion)

@@ -1,7 +1,7 @@
 """InvertedPendulum: the inverted pendulum on a cart (37) as a co-simulation FMU.
 
 docs/model.md section 7 (the plants) and section 11 (co-simulation semantics).  The model
-equations are in ``inverted_pendulum_model``, the integrator in ``plant_integration``; this
+equations are in ``plants.inverted_pendulum.model``, the integrator in ``plant_integration``; this
 class only adapts them to FMI.
 
 Co-simulation semantics:

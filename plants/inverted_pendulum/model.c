@@ -1,6 +1,6 @@
 /* InvertedPendulum: the inverted pendulum on a cart, eq. (37) of Pan, Er, Huang, Wang
- * (IEEE TFS 2011), as a native FMU.  The C twin of inverted_pendulum_model.py and
- * inverted_pendulum_fmu.py: same equations, same order of operations.
+ * (IEEE TFS 2011), as a native FMU.  The C twin of this folder's model.py and
+ * fmu.py: same equations, same order of operations.
  *
  *   dx1 = x2                                                            (37)
  *   den = lp (4/3 - mp cos^2 x1 / (mc + mp))

@@ -1,7 +1,7 @@
 """Manipulator: the single-link manipulator with friction (38, 39) as a co-simulation FMU.
 
 docs/model.md section 7 (the plants) and section 11 (co-simulation semantics).  The model
-equations are in ``manipulator_model``, the integrator in ``plant_integration``; this class only
+equations are in ``plants.manipulator.model``, the integrator in ``plant_integration``; this class only
 adapts them to FMI.
 
 Co-simulation semantics:
@@ -14,7 +14,7 @@ Co-simulation semantics:
   controller latches e(0), de(0) at the end of initialisation.
 * doStep(t, h) holds u over [t, t + h] and integrates with classical RK4 in
   ceil(h / max_internal_step) equal internal steps, with no event handling
-  at x2 = 0 (see ``manipulator_model``: first-order convergence where the
+  at x2 = 0 (see ``plants.manipulator.model``: first-order convergence where the
   Coulomb friction switches or the arm sticks).
 """
 import math

@@ -1,6 +1,6 @@
 /* Manipulator: the single-link manipulator with friction and a varying payload,
  * eqs. (38, 39) of Pan, Er, Huang, Wang (IEEE TFS 2011), as a native FMU.  The C twin
- * of manipulator_model.py and manipulator_fmu.py: same equations, same order.
+ * of this folder's model.py and fmu.py: same equations, same order.
  *
  *   dx1 = x2                                                        (38)
  *   dx2 = -(dr x2 + mr gv lr cos x1) / J + u / J + d                (38)
@@ -74,7 +74,7 @@ int model_compute_outputs(ModelInstance *m) {
     return MODEL_OK;
 }
 
-/* ------------------------------------------- model exchange: friction modes (manipulator_model.py)
+/* ------------------------------------------- model exchange: friction modes (model.py)
  * docs/model_exchange.md: slipping forwards (+1) or backwards (-1), the Coulomb sign is the
  * mode's; stuck (0), static friction balances the applied torque and the link rests. */
 #define SLIP_BACKWARD (-1.0)

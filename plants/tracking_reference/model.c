@@ -1,5 +1,5 @@
 /* TrackingReference: ym(t) = A sin(omega t), its derivatives and the tracking errors
- * e = ym - y, de = dym - dy as a native FMU (the C twin of tracking_reference_fmu.py).
+ * e = ym - y, de = dym - dy as a native FMU (the C twin of this folder's fmu.py).
  * ym, dym, ddym depend on time only; e, de directly on the inputs y, dy. */
 #include <math.h>
 
