@@ -79,10 +79,10 @@ def _run_builder(script: Path, fmu_path: Path, project_files, label: str):
 
 
 def _embed_ls_ref(fmu_path: Path, model: str, label: str):
-    """Append the FMU's FMI-LS-REF files (native_build/ls_ref.py), in a fresh interpreter for the reason
-    above: making the reference runs the FMU."""
+    """Append the FMU's FMI-LS-REF files (native_build/ls_ref.py, written by native_build/package.py), in a
+    fresh interpreter for the reason above: making the reference runs the FMU."""
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    completed = subprocess.run([sys.executable, "-m", "native_build.ls_ref", str(fmu_path), model], cwd=ROOT,
+    completed = subprocess.run([sys.executable, "-m", "native_build.package", str(fmu_path), model], cwd=ROOT,
                                env=environment, capture_output=True, text=True)
     if completed.returncode != 0:
         raise RuntimeError(f"adding FMI-LS-REF to {label} failed:\n{completed.stderr}")

@@ -14,9 +14,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
-import sys
 import tempfile
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -179,21 +177,3 @@ def read_table(data: bytes) -> np.ndarray:
         path = Path(scratch) / "table.csv"
         path.write_bytes(data)
         return read_csv(str(path))
-
-
-def embed(fmu: Path, model: str) -> None:
-    """Append the FMI-LS-REF files to a built FMU archive in place (the pythonfmu edition's build: its
-    archive comes from pythonfmu), with fixed dates so the added entries are the same on every build."""
-    with zipfile.ZipFile(fmu) as archive:
-        files = {name: archive.read(name) for name in archive.namelist() if not name.endswith("/")}
-    added = ls_ref_files(load(model), files)
-    with zipfile.ZipFile(fmu, "a", zipfile.ZIP_DEFLATED) as archive:
-        for name in sorted(added):
-            info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
-            info.compress_type = zipfile.ZIP_DEFLATED
-            info.external_attr = 0o644 << 16
-            archive.writestr(info, added[name])
-
-
-if __name__ == "__main__":  # python -m native_build.ls_ref FMU MODEL (build_fmu.py: in a fresh interpreter)
-    embed(Path(sys.argv[1]), sys.argv[2])

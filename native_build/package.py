@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import os
 import struct
+import sys
 import tempfile
 import zipfile
 from pathlib import Path
@@ -45,15 +46,33 @@ def fat_macho(binaries: list[bytes]) -> bytes:
 
 
 
+def write_entries(archive: zipfile.ZipFile, files: dict[str, bytes]) -> None:
+    """``files`` into ``archive`` in name order, with a fixed date and mode: the same bytes on every build."""
+    for name in sorted(files):
+        info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
+        info.compress_type = zipfile.ZIP_DEFLATED
+        info.external_attr = 0o644 << 16
+        archive.writestr(info, files[name])
+
+
 def zip_archive(files: dict[str, bytes]) -> bytes:
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
-        for name in sorted(files):
-            info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
-            info.compress_type = zipfile.ZIP_DEFLATED
-            info.external_attr = 0o644 << 16
-            archive.writestr(info, files[name])
+        write_entries(archive, files)
     return buffer.getvalue()
+
+
+def embed_ls_ref(fmu: Path, model: str) -> None:
+    """Append the FMI-LS-REF files (native_build.ls_ref) to a built FMU archive in place: the pythonfmu
+    edition's build, whose archive comes from pythonfmu."""
+    with zipfile.ZipFile(fmu) as archive:
+        files = {name: archive.read(name) for name in archive.namelist() if not name.endswith("/")}
+    with zipfile.ZipFile(fmu, "a", zipfile.ZIP_DEFLATED) as archive:
+        write_entries(archive, ls_ref.ls_ref_files(ls_ref.load(model), files))
+
+
+if __name__ == "__main__":  # python -m native_build.package FMU MODEL (build_fmu.py: in a fresh interpreter)
+    embed_ls_ref(Path(sys.argv[1]), sys.argv[2])
 
 
 

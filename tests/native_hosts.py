@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -40,6 +41,11 @@ FAILING_RUNS = {
                          dict(e=[0.2] * 5 + [1e308] * 3, de=[-0.1] * 8, ym=[0.3] * 8, dym=[0.5] * 8)),
     "invalid parameter": ("InvertedPendulum", dict(mc=-1.0), dict(u=[0.0] * 3)),
 }
+
+
+def first_program(*candidates: str) -> str | None:
+    """The first of ``candidates`` found on PATH (or as a path), else None."""
+    return next((found for found in map(shutil.which, candidates) if found), None)
 
 
 def zig_build(target: str, output: Path, *extra: str) -> Path:

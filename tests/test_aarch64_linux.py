@@ -16,7 +16,6 @@ skips when either is absent.  ``QEMU_LD_PREFIX`` names another sysroot.
 """
 import os
 import re
-import shutil
 import time
 from pathlib import Path
 
@@ -26,7 +25,8 @@ import pytest
 import build_native
 from harness.scenario import scenario_names
 from tests.message_meaning import meaning
-from tests.native_hosts import CASES, FAILING_RUNS, failing_run, linux_host, recorded_runs, scaled_difference
+from tests.native_hosts import (CASES, FAILING_RUNS, failing_run, first_program, linux_host, recorded_runs,
+                                scaled_difference)
 
 SYSROOT = Path(os.environ.get("QEMU_LD_PREFIX", "/usr/aarch64-linux-gnu"))
 # Largest |aarch64 - x86_64| of an output, relative to that output's largest |value| in the run;
@@ -48,11 +48,7 @@ def same_glibc() -> bool:
 
 def qemu_program() -> str | None:
     """qemu-user's aarch64 emulator (Debian: qemu-user, or qemu-user-static)."""
-    for candidate in ("qemu-aarch64", "qemu-aarch64-static"):
-        found = shutil.which(candidate)
-        if found:
-            return found
-    return None
+    return first_program("qemu-aarch64", "qemu-aarch64-static")
 
 
 pytestmark = [

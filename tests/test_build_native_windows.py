@@ -31,8 +31,8 @@ import pytest
 import build_native
 from harness.scenario import scenario_names
 from tests.message_meaning import meaning
-from tests.native_hosts import (CASES, FAILING_RUNS, failing_run, recorded_runs, relative_difference,
-                                run_with_files, scaled_difference, zig_build)
+from tests.native_hosts import (CASES, FAILING_RUNS, failing_run, first_program, recorded_runs,
+                                relative_difference, run_with_files, scaled_difference, zig_build)
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_PREFIX = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "afc-fmi" / "wine-prefix"
@@ -45,11 +45,7 @@ WINDOWS_TOLERANCE = 1e-12
 
 def wine_program() -> str | None:
     """wine64 (Debian's wine64 package puts it in /usr/lib/wine), else wine."""
-    for candidate in ("wine64", "/usr/lib/wine/wine64", "wine"):
-        found = shutil.which(candidate)
-        if found:
-            return found
-    return None
+    return first_program("wine64", "/usr/lib/wine/wine64", "wine")
 
 
 pytestmark = [
