@@ -6,7 +6,7 @@
  * modelDescription declares both, as the Modelica Reference-FMUs do; the same model
  * functions serve both: docs/model_exchange.md).  The build generates model_variables.h from the
  * Python declaration table (the VARIABLES of each pythonfmu FMU class, see
- * build_native.py): value references VR_<name>, N_VARIABLES and the table of names,
+ * harness/fmu_build/native.py): value references VR_<name>, N_VARIABLES and the table of names,
  * causalities, starts and valid ranges that the layer validates with.
  *
  * The layer mirrors fmu_src/afc_slave_base.py (TableSlave): values in table order,

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 
 from . import master_loop, me_loop, me_master, termination
 from . import progress as progress_module

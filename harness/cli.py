@@ -11,8 +11,8 @@ import json
 import os
 import sys
 
-import fmu_catalog
-from c_toolchain import NativeBuildError
+from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build.toolchain import NativeBuildError
 
 from . import cli_args, progress, termination, variants
 from . import scenario as scenarios

@@ -16,7 +16,7 @@ import re
 import sys
 from pathlib import Path
 
-import c_toolchain
+from harness.fmu_build import toolchain as c_toolchain
 
 ENVIRONMENT_SWITCH = "AFC_MASTER_LOOP"  # "python": always the Python loop; "c": the compiled one or an error
 CHOICES = ("auto", "python", "c")

@@ -11,7 +11,7 @@ import math
 import numbers
 from pathlib import Path
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 
 from .fmi import FmuFileError, ModelInfo
 from .scenario import Scenario, ScenarioError, did_you_mean

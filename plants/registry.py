@@ -9,7 +9,7 @@ A model folder ``plants/<name>/`` holds (as the Modelica Reference-FMUs do)
 * ``model.py``: the pure model of an RK4 plant (its derivative; ``oracle(parameters)`` when the
   in-process oracle of harness/studies/oracle.py should know it); the reference has none.
 
-Both builds take their FMU tables from here through fmu_catalog.py, the tests their per-FMU cases
+Both builds take their FMU tables from here through harness/fmu_build/catalog.py, the tests their per-FMU cases
 from the declarations: a new plant is its folder, its scenario and references, and a docs row.
 Every RK4 plant shares the integrator (plant_integration.py / .c) and the slave base class
 (rk4_plant_slave.py / .c), which stay in plants/.

@@ -219,7 +219,7 @@ def pytest_collection_modifyitems(items):
 
 @pytest.fixture(scope="session")
 def fmu_paths():
-    import build_fmu
+    from harness.fmu_build import builder as build_fmu
 
     return build_fmu.ensure_built()
 
@@ -227,7 +227,7 @@ def fmu_paths():
 @pytest.fixture(scope="session")
 def lag_plant_fmu(tmp_path_factory):
     """A user's plant FMU that the project does not ship (tests/data/first_order_lag_fmu.py), built once."""
-    import build_fmu
+    from harness.fmu_build import builder as build_fmu
 
     return build_fmu.build_script(ROOT / "tests" / "data" / "first_order_lag_fmu.py",
                                   tmp_path_factory.mktemp("lag_plant") / "FirstOrderLag.fmu", [])
@@ -257,8 +257,8 @@ def _build_before_the_workers_start():
     """Under pytest-xdist (-n), the controller builds what is stale once, before its workers start:
     otherwise each worker would build the same FMUs at once (safe, as every build replaces its file whole,
     but twice the work)."""
-    import build_fmu
-    import build_native
+    from harness.fmu_build import builder as build_fmu
+    from harness.fmu_build import native as build_native
 
     build_fmu.ensure_built()
     if build_native.compiler_available():

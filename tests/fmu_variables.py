@@ -6,7 +6,7 @@ FMU once per test module.
 """
 from __future__ import annotations
 
-import fmu_catalog
+from harness.fmu_build import catalog as fmu_catalog
 from tests.fmu_helpers import Driven
 
 FMU_IDS = tuple(f.model_identifier for f in fmu_catalog.FMUS)

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from fmpy import read_model_description
 
-import c_toolchain
+from harness.fmu_build import toolchain as c_toolchain
 
 ROOT = Path(__file__).resolve().parents[1]
 HOST_SOURCE = ROOT / "tests" / "c_host" / "host.c"

@@ -9,7 +9,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from fmu_src import afc_math
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 from harness import variants
 from tests.fmu_helpers import Driven
 

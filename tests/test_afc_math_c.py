@@ -10,8 +10,8 @@ import struct
 import numpy as np
 import pytest
 
-import build_native
-from native_build import compiler
+from harness.fmu_build import native as build_native
+from harness.fmu_build.native_stages import compiler
 from fmu_src import afc_math
 from harness import variants
 
@@ -432,7 +432,7 @@ def test_the_fls_input_vector_alpha_and_z_are_the_python_ones(afc, order):
 
 
 def parameter_values(**changes):
-    import build_fmu
+    from harness.fmu_build import builder as build_fmu
 
     values = {v.name: v.start for v in build_fmu.model_class("AdaptiveFuzzyController").VARIABLES
               if v.causality == "parameter"}

@@ -2,23 +2,25 @@
 
 Rules (docs/architecture.md draws them):
 
-* no import cycle among the project's modules (harness/, plants/, fmu_src/ and the top-level
-  build modules), whether the imports are at module level or inside functions;
+* no import cycle among the project's modules (harness/, plants/, fmu_src/ and the build command
+  build_fmu.py), whether the imports are at module level or inside functions;
 * no function-local import of a project module: every project import sits at module level, where
   a reader finds it (optional third-party packages may be imported where they are used);
 * imports run one way: ``harness.hosts`` -> ``harness.studies`` -> the harness core; the core
   imports no study and no host runner (except ``harness/cli.py``, the composition root that
   registers every subcommand), and no study imports a host runner;
 * the harness's top level holds the core only (studies in harness/studies/, host runners in
-  harness/hosts/);
+  harness/hosts/, the FMU builds in harness/fmu_build/, which import neither studies nor hosts);
 * a chain of modules (``CHAINS``: the tune study's sub-package, the host matrix's modules, the
   native build's stages) reads
   from the bottom up: each module imports only the chain's modules before it, and a new module of
   harness/studies/tune/ takes its place in the chain;
-* ``build_native`` (and its stages, ``native_build``) never reaches ``build_fmu`` (``build_fmu`` may import ``build_native``), and
+* the native build ``harness.fmu_build.native`` (and its stages, ``harness.fmu_build.native_stages``) never
+  reaches the build command ``harness.fmu_build.builder`` (which may import the native build), and
   the masters' compiled loops reach no FMU build and no FMU source: ``harness.master_loop`` and
   ``harness.me_loop`` (with their loader ``harness.compiled_loop`` and ``harness.loop_interface``)
-  import only the C toolchain helper (and the core beside them), which imports no project module.
+  import only the C toolchain helper ``harness.fmu_build.toolchain`` (and the core beside them), which
+  imports no project module.
 
 Every rule is also run on small synthetic source trees that break it, so each check is seen to fail.
 """
@@ -31,8 +33,11 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-TOP_LEVEL_MODULES = ("build_fmu", "build_native", "fmu_catalog", "fmu_staging", "c_toolchain")
-PACKAGES = ("harness", "plants", "fmu_src", "native_build")
+TOP_LEVEL_MODULES = ("build_fmu",)  # the build command at the root; its code is harness/fmu_build/
+PACKAGES = ("harness", "plants", "fmu_src")
+BUILD = "harness.fmu_build"
+BUILDER, NATIVE_BUILD, NATIVE_STAGES = f"{BUILD}.builder", f"{BUILD}.native", f"{BUILD}.native_stages"
+TOOLCHAIN = f"{BUILD}.toolchain"
 #: the co-simulation core at the top of harness/ (docs/architecture.md); anything else goes in a sub-package
 CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harness.scenario", "harness.variants",
         "harness.fmi", "harness.scenario_checks", "harness.master", "harness.compiled_loop", "harness.loop_interface",
@@ -41,7 +46,7 @@ CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harne
 COMPOSITION_ROOT = "harness.cli"
 STUDIES, HOSTS = "harness.studies", "harness.hosts"
 #: what the master's compiled loop may never reach, directly or through other modules
-LOOP_FORBIDDEN = ("build_native", "native_build", "build_fmu", "fmu_catalog", "plants", "fmu_src")
+LOOP_FORBIDDEN = (NATIVE_BUILD, NATIVE_STAGES, BUILDER, f"{BUILD}.catalog", f"{BUILD}.staging", "plants", "fmu_src")
 #: modules of one idea each that build on one another: each imports only those before it in its chain
 #: (harness/studies/tune/__init__.py and harness/hosts/matrix.py say what each holds)
 CHAINS = {
@@ -49,10 +54,10 @@ CHAINS = {
                              "scenario_file", "summary", "report", "comparison", "study", "command_line"),
     "harness.hosts": ("trajectory", "console_capture", "plain_fmpy", "host_runners", "host_registry", "matrix_row",
                       "matrix_prose", "matrix_report", "matrix"),
-    "native_build": ("targets", "model_exchange", "description", "header", "compiler", "sources", "ls_ref", "package"),
+    NATIVE_STAGES: ("targets", "model_exchange", "description", "header", "compiler", "sources", "ls_ref", "package"),
 }
 #: packages whose every module is in their chain (harness/hosts/ holds other hosts' bindings beside its chain)
-WHOLE_CHAINS = ("harness.studies.tune", "native_build")
+WHOLE_CHAINS = ("harness.studies.tune", NATIVE_STAGES)
 
 
 @dataclass(frozen=True)
@@ -189,13 +194,15 @@ def _layer(module: str) -> str:
         return "studies"
     if module == HOSTS or module.startswith(HOSTS + "."):
         return "hosts"
+    if module == BUILD or module.startswith(BUILD + "."):
+        return "build"
     if module == "harness" or module.startswith("harness."):
         return "core"
     return "outside"
 
 
 #: (importing layer, imported layer) pairs that go the wrong way
-WRONG_WAY = {("core", "studies"), ("core", "hosts"), ("studies", "hosts")}
+WRONG_WAY = {("core", "studies"), ("core", "hosts"), ("studies", "hosts"), ("build", "studies"), ("build", "hosts")}
 
 
 def chain_problems(files: dict, imports, root: Path) -> list:
@@ -228,13 +235,14 @@ def violations(root: Path = ROOT) -> list:
         direction = (_layer(i.source), _layer(i.target))
         if direction in WRONG_WAY and i.source != COMPOSITION_ROOT:
             problems.append(f"{files[i.source].relative_to(root)}:{i.line}: {i.source} ({direction[0]}) imports "
-                            f"{i.target} ({direction[1]}): imports run hosts -> studies -> core")
+                            f"{i.target} ({direction[1]}): imports run hosts -> studies -> core, and the "
+                            "builds import neither studies nor hosts")
     for name in sorted(files):
         if _layer(name) == "core" and name not in CORE:
             problems.append(f"{files[name].relative_to(root)}: not part of the co-simulation core: move it to "
                             "harness/studies/ or harness/hosts/ (or add it to the core deliberately)")
-    if "build_fmu" in reachable(imports, "build_native"):
-        problems.append("build_native reaches build_fmu (build_fmu may import build_native, not the reverse)")
+    if BUILDER in reachable(imports, NATIVE_BUILD):
+        problems.append(f"{NATIVE_BUILD} reaches {BUILDER} (the builder may import the native build, not the reverse)")
     for loop in ("harness.master_loop", "harness.me_loop", "harness.compiled_loop", "harness.loop_interface"):
         if loop not in files:
             continue
@@ -243,12 +251,12 @@ def violations(root: Path = ROOT) -> list:
             hits = sorted(m for m in reached if m == forbidden or m.startswith(forbidden + "."))
             if hits:
                 problems.append(f"{loop} reaches {', '.join(hits)}: the compiled loop needs only "
-                                "c_toolchain")
+                                f"{TOOLCHAIN}")
     problems += chain_problems(files, imports, root)
-    if "c_toolchain" in files:
-        own = sorted({i.target for i in imports if i.source == "c_toolchain"})
+    if TOOLCHAIN in files:
+        own = sorted({i.target for i in imports if i.source == TOOLCHAIN})
         if own:
-            problems.append(f"c_toolchain imports project modules {', '.join(own)}: it stands alone")
+            problems.append(f"{TOOLCHAIN} imports project modules {', '.join(own)}: it stands alone")
     return problems
 
 
@@ -262,8 +270,9 @@ def test_the_graph_sees_the_imports_it_must_see():
     imports = {(i.source, i.target) for i in import_graph(ROOT)}
     assert ("harness.master", "harness.master_loop") in imports
     assert ("harness.master_loop", "harness.compiled_loop") in imports
-    assert ("harness.compiled_loop", "c_toolchain") in imports
-    assert ("build_fmu", "build_native") in imports
+    assert ("harness.compiled_loop", TOOLCHAIN) in imports
+    assert (BUILDER, NATIVE_BUILD) in imports
+    assert ("build_fmu", BUILDER) in imports
     assert ("harness.cli", "harness.studies.tables") in imports
     assert ("harness.hosts.matrix", "harness.studies.step_study") in imports
     assert ("harness.studies.tune.study", "harness.studies.tune.loop") in imports
@@ -276,7 +285,8 @@ def _tree(root: Path, files: dict) -> Path:
         path = root / name
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text)
-    for package in ("harness", "harness/studies", "harness/studies/tune", "harness/hosts", "plants", "fmu_src"):
+    for package in ("harness", "harness/studies", "harness/studies/tune", "harness/hosts", "harness/fmu_build",
+                    "plants", "fmu_src"):
         (root / package).mkdir(parents=True, exist_ok=True)
         (root / package / "__init__.py").touch()
     return root
@@ -285,7 +295,7 @@ def _tree(root: Path, files: dict) -> Path:
 GOOD = {"harness/scenario.py": "import math\n",
         "harness/master.py": "from . import master_loop\nfrom .scenario import math\n",
         "harness/master_loop.py": "from . import compiled_loop\n",
-        "harness/compiled_loop.py": "import c_toolchain\n",
+        "harness/compiled_loop.py": "from .fmu_build import toolchain\n",
         "harness/cli.py": "from .studies import tables\nfrom .hosts import matrix\n",
         "harness/studies/tables.py": "from .. import master\n",
         "harness/hosts/matrix.py": "from ..studies.tables import master\nfrom . import matrix_report\n\n\n"
@@ -296,10 +306,11 @@ GOOD = {"harness/scenario.py": "import math\n",
         "harness/studies/tune/space.py": "from .errors import TuneError\n",
         "harness/studies/tune/errors.py": "from ... import cli_args\n",
         "harness/studies/tune/command_line.py": "from .space import x\nfrom .errors import y\n",
-        "c_toolchain.py": "import os\n",
-        "build_native.py": "import c_toolchain\nimport fmu_catalog\n",
-        "build_fmu.py": "import build_native\nimport fmu_catalog\n",
-        "fmu_catalog.py": "from plants import registry\n",
+        "harness/fmu_build/toolchain.py": "import os\n",
+        "harness/fmu_build/native.py": "from . import toolchain\nfrom . import catalog\n",
+        "harness/fmu_build/builder.py": "from . import native\nfrom . import catalog\nfrom .. import scenario\n",
+        "harness/fmu_build/catalog.py": "from plants import registry\n",
+        "build_fmu.py": "from harness.fmu_build.builder import main\n",
         "plants/registry.py": "import math\n"}
 
 
@@ -308,10 +319,14 @@ def test_a_tree_that_keeps_the_rules_passes(tmp_path):
 
 
 @pytest.mark.parametrize("file,text,expected", [
-    ("build_native.py", "import c_toolchain\nimport build_fmu\n", "import cycle: build_fmu <-> build_native"),
-    ("build_native.py", "import c_toolchain\n\n\ndef f():\n    import build_fmu\n",
-     "function-local import of build_fmu"),
-    ("fmu_catalog.py", "import build_fmu\n", "build_native reaches build_fmu"),
+    ("harness/fmu_build/native.py", "from . import toolchain\nfrom . import builder\n",
+     "import cycle: harness.fmu_build.builder <-> harness.fmu_build.native"),
+    ("harness/fmu_build/native.py", "from . import toolchain\n\n\ndef f():\n    from . import builder\n",
+     "function-local import of harness.fmu_build.builder"),
+    ("harness/fmu_build/catalog.py", "from . import builder\n",
+     "harness.fmu_build.native reaches harness.fmu_build.builder"),
+    ("harness/fmu_build/catalog.py", "from ..studies import tables\n",
+     "harness.fmu_build.catalog (build) imports harness.studies.tables (studies)"),
     ("harness/master.py", "from . import master_loop\n\n\ndef f():\n    from .scenario import math\n",
      "harness/master.py:5: function-local import of harness.scenario"),
     ("harness/master.py", "from . import master_loop\nfrom .studies import tables\n",
@@ -320,9 +335,12 @@ def test_a_tree_that_keeps_the_rules_passes(tmp_path):
      "harness.scenario (core) imports harness.hosts.matrix (hosts)"),
     ("harness/studies/tables.py", "from .. import master\nfrom ..hosts import matrix\n",
      "harness.studies.tables (studies) imports harness.hosts.matrix (hosts)"),
-    ("harness/master_loop.py", "import build_native\n", "harness.master_loop reaches build_native"),
-    ("harness/compiled_loop.py", "import c_toolchain\nimport build_fmu\n", "harness.master_loop reaches build_fmu"),
-    ("c_toolchain.py", "import fmu_catalog\n", "c_toolchain imports project modules fmu_catalog"),
+    ("harness/master_loop.py", "from .fmu_build import native\n",
+     "harness.master_loop reaches harness.fmu_build.native"),
+    ("harness/compiled_loop.py", "from .fmu_build import toolchain, builder\n",
+     "harness.master_loop reaches harness.fmu_build.builder"),
+    ("harness/fmu_build/toolchain.py", "from . import catalog\n",
+     "harness.fmu_build.toolchain imports project modules harness.fmu_build.catalog"),
     ("harness/sweep.py", "import math\n", "harness/sweep.py: not part of the co-simulation core"),
     ("harness/studies/tune/errors.py", "from .space import x\n",
      "harness.studies.tune.errors imports harness.studies.tune.space, which comes after it in the chain"),

@@ -15,11 +15,11 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 
-import build_fmu
-import build_native
-import native_build
-from native_build import compiler, description, header
-from native_build import model_exchange as native_model_exchange
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
+from harness.fmu_build import native_stages as native_build
+from harness.fmu_build.native_stages import compiler, description, header
+from harness.fmu_build.native_stages import model_exchange as native_model_exchange
 from harness import variants
 from tests.fmu_helpers import Driven
 from tests.message_meaning import meaning, parameter_error, written_as_c_does

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import build_native
+from harness.fmu_build import native as build_native
 from harness.scenario import scenario_names
 from tests.message_meaning import meaning
 from tests.native_hosts import (CASES, FAILING_RUNS, failing_run, first_program, recorded_runs,

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import build_native
-import c_toolchain
+from harness.fmu_build import native as build_native
+from harness.fmu_build import toolchain as c_toolchain
 from tests import me_helpers as me
 from tests.test_build_native_windows import (DEFAULT_PREFIX, native, run_with_files,  # noqa: F401 - fixtures
                                              scaled_difference, wine, wine_program)

@@ -25,7 +25,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-import build_native
+from harness.fmu_build import native as build_native
 from tests.test_readme_commands import block_commands, readme_blocks
 
 ROOT = Path(__file__).resolve().parents[1]

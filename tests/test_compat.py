@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-import build_native
-import fmu_catalog
+from harness.fmu_build import native as build_native
+from harness.fmu_build import catalog as fmu_catalog
 from harness.cli import main as cli_main
 from harness.studies import compat
 

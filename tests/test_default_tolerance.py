@@ -15,8 +15,8 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 from fmpy.util import read_csv
 
-import build_fmu
-import build_native
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
 from tests.conftest import ROOT
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),

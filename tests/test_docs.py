@@ -2,7 +2,7 @@
 import re
 from pathlib import Path
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 from harness import scenario as scenarios
 from tests.test_model_citations import CITES_WORKING_NOTES, WORKING_NOTES
 

@@ -12,7 +12,7 @@ import zipfile
 import numpy as np
 import pytest
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 from harness import scenario as scenarios
 from harness.hosts import engines
 from harness.cli import main as cli_main
@@ -260,7 +260,7 @@ def test_the_step_is_in_every_engines_annotation(packages):
 
 
 def test_a_model_exchange_package_declares_omsimulators_cvode_for_every_component(tmp_path, capsys):
-    import build_native
+    from harness.fmu_build import native as build_native
     from fmpy.ssp.ssd import read_ssd
     from lxml import etree
 

@@ -15,7 +15,7 @@ import pytest
 from fmpy import extract
 from fmpy.fmi1 import FMICallException
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 from tests.fmu_helpers import Driven
 
 DISCARD, FATAL = 2, 4

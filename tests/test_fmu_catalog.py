@@ -1,14 +1,14 @@
-"""The FMU declarations (fmu_catalog.py, plants/registry.py): every FMU has one row, every row's files exist."""
+"""The FMU declarations (harness/fmu_build/catalog.py, plants/registry.py): every FMU has one row, every row's files exist."""
 from pathlib import Path
 
 import pytest
 
-import build_fmu
-import build_native
-from native_build import description
-from native_build import model_exchange as native_model_exchange
-import fmu_catalog
-import fmu_staging
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
+from harness.fmu_build.native_stages import description
+from harness.fmu_build.native_stages import model_exchange as native_model_exchange
+from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build import staging as fmu_staging
 from plants import registry
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -88,7 +88,7 @@ def test_the_oracle_models_are_the_plants_own_functions():
 
 def test_each_fmu_file_loads_under_one_module_name():
     """The FMU sources load as modules of their packages only: no folder of theirs on sys.path, no
-    second copy under a top-level name (fmu_staging.py gives them those names inside the FMUs only)."""
+    second copy under a top-level name (harness/fmu_build/staging.py gives them those names inside the FMUs only)."""
     import sys
 
     staged = {fmu_staging.staged_module(p) for row in fmu_catalog.FMUS for p in row.sources}

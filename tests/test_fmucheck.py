@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 
 ROOT = Path(__file__).resolve().parents[1]
 CHECKER = ROOT.parent / "shared" / "tools" / "fmucheck" / "fmucheck.sh"

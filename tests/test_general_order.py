@@ -7,6 +7,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 from scipy.linalg import solve_continuous_lyapunov
 
+from harness.fmu_build import catalog
 from fmu_src import afc_math
 from tests.fmu_helpers import Driven
 
@@ -241,7 +242,7 @@ def test_fmu_matches_the_pure_math_at_any_order(fmu_paths, order, sets):
     # the inputs below are no derivative chain: pin e(0), de(0), ... (no host-robust re-latch)
     pinned = dict(zip(("e0", "de0", "d2e0", "d3e0"), start.values()))
     c.initialize(order=order, sets=sets, variant=1, k1=4.0, k2=6.0, k3=4.0, k4=1.0, initial_error=2, **pinned)
-    values = {v.name: v.start for v in __import__("build_fmu").model_class("AdaptiveFuzzyController").VARIABLES
+    values = {v.name: v.start for v in catalog.model_class("AdaptiveFuzzyController").VARIABLES
               if v.causality == "parameter"}
     values.update(order=order, sets=sets, variant=1, k1=4.0, k2=6.0, k3=4.0, k4=1.0)
     p = afc_math.controller_parameters(values, tuple(start.values()), 0.0)

@@ -13,8 +13,8 @@ import random
 
 import pytest
 
-import build_native
-from native_build import compiler
+from harness.fmu_build import native as build_native
+from harness.fmu_build.native_stages import compiler
 from fmu_src import initial_error_latch as latch_py
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-import build_native
-import c_toolchain
+from harness.fmu_build import native as build_native
+from harness.fmu_build import toolchain as c_toolchain
 from harness import compiled_loop, loop_interface, master_loop, me_loop
 
 try:

@@ -12,11 +12,11 @@ from xml.etree import ElementTree as ET
 
 import pytest
 
-import build_fmu
-import build_native
-import fmu_catalog
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
+from harness.fmu_build import catalog as fmu_catalog
 from harness.studies import compat
-from native_build import ls_ref
+from harness.fmu_build.native_stages import ls_ref
 
 MODELS = [row.model_identifier for row in fmu_catalog.FMUS]
 NATIVE = [m.model_identifier for m in build_native.models()]
@@ -86,7 +86,7 @@ def test_manifest_names_the_layered_standard_and_its_files(model, native):
 
 
 def test_stored_experiments_are_compats(python_fmus):
-    """native_build/ls_ref_experiments/ is what compat's closed loops give now (else: python -m harness
+    """harness/fmu_build/native_stages/ls_ref_experiments/ is what compat's closed loops give now (else: python -m harness
     compat --ls-ref-experiments)."""
     experiments = compat.closed_loop_experiments(MODELS, python_fmus)
     assert ls_ref.stored_models() == sorted(MODELS)

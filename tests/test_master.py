@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 from harness import scenario as scenarios
 from harness import variants
 from harness.cli import main as cli_main

@@ -17,8 +17,8 @@ import math
 import numpy as np
 import pytest
 
-import build_native
-import c_toolchain
+from harness.fmu_build import native as build_native
+from harness.fmu_build import toolchain as c_toolchain
 from harness import compiled_loop, master_loop
 from harness import scenario as scenarios
 from harness.loop_interface import ACTION_READ, ACTION_WRITE, Action, LoopOutcome, Outcome, Stepper

@@ -105,7 +105,7 @@ def test_unknown_host_is_a_one_line_error(capsys):
 
 def test_the_native_edition_gives_every_host_the_same_rows_and_warnings(monkeypatch, fmu_paths):
     """Every host, python vs native FMUs: the same scores to the last bit and the same warning texts."""
-    import build_native
+    from harness.fmu_build import native as build_native
 
     if not build_native.compiler_available():
         pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-import build_native
+from harness.fmu_build import native as build_native
 from harness import cli
 from harness.studies import me_accuracy
 

@@ -23,8 +23,8 @@ import sys
 import numpy as np
 import pytest
 
-import build_fmu
-import build_native
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
 from harness import scenario as scenarios
 from harness.fmi import MODEL_EXCHANGE, ModelInfo
 from harness.me_master import ModelExchangeMaster

@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import build_fmu
-import build_native
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
 from harness import cli, cvode
 from harness import scenario as scenarios
 from harness.cases import Case, run_case

@@ -25,7 +25,7 @@ import sys
 
 import pytest
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 from tests import memory_cycles
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

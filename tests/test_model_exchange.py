@@ -24,10 +24,10 @@ import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 
-import build_fmu
-import build_native
-import fmu_catalog
-from native_build import model_exchange as native_model_exchange
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
+from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build.native_stages import model_exchange as native_model_exchange
 from fmu_src import afc_math
 from plants.dc_motor_arm import model as dc_motor_arm_model
 from plants.inverted_pendulum import model as inverted_pendulum_model

@@ -7,7 +7,7 @@ import zipfile
 
 import pytest
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 from harness import scenario as scenarios
 from harness.studies import sweep_executors, sweep_grid
 from harness.cases import Case, run_case

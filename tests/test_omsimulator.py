@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import build_fmu
-import build_native
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
 from harness import scenario as scenarios
 from harness.hosts import matrix as hosts
 from harness.hosts import omsimulator

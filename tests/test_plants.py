@@ -21,8 +21,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-import build_fmu  # noqa: E402
-import fmu_catalog  # noqa: E402
+from harness.fmu_build import builder as build_fmu  # noqa: E402
+from harness.fmu_build import catalog as fmu_catalog  # noqa: E402
 from tests.fmu_helpers import Driven  # noqa: E402
 from plants import plant_integration  # noqa: E402
 from plants.inverted_pendulum import model as inverted_pendulum_model  # noqa: E402

@@ -10,8 +10,8 @@ import time
 
 import pytest
 
-import build_native
-from native_build import ls_ref
+from harness.fmu_build import native as build_native
+from harness.fmu_build.native_stages import ls_ref
 from harness import progress as progress_module
 from harness.progress import Progress, WorkBoard, time_left_s
 

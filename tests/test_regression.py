@@ -144,7 +144,7 @@ def test_cli_exit_codes_and_hint(monkeypatch, tmp_path, capsys):
 
 @pytest.mark.parametrize("edition", ["native", "native3"])
 def test_the_references_hold_for_the_native_edition(edition, tmp_path, capsys):
-    import build_native
+    from harness.fmu_build import native as build_native
 
     if not build_native.compiler_available():
         pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
@@ -156,7 +156,7 @@ def test_the_references_hold_for_the_native_edition(edition, tmp_path, capsys):
 def test_model_exchange_holds_to_references_of_its_own(tmp_path, capsys):
     """The co-simulation's references carry its O(step) error, beyond the tube in the controller's transient;
     Model Exchange has its own (harness/references/model_exchange/)."""
-    import build_native
+    from harness.fmu_build import native as build_native
 
     if not build_native.compiler_available():
         pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
@@ -168,7 +168,7 @@ def test_model_exchange_holds_to_references_of_its_own(tmp_path, capsys):
                      "--edition", "native", "--report", str(tmp_path)]) == 0
     assert "2/2 cases pass" in capsys.readouterr().out
     # against the co-simulation's references instead: outside the tube in the transient
-    import build_fmu
+    from harness.fmu_build import builder as build_fmu
 
     outcome = regression.regress([Case("pendulum_case1", "fixed", algorithm="me")], report_dir=None,
                                  reference_dir=regression.REFERENCE_DIR, fmu_paths=build_fmu.ensure_built(edition="native"))

@@ -21,9 +21,9 @@ from fmpy import read_model_description, simulate_fmu
 from fmpy.build import build_platform_binary
 from fmpy.validation import validate_fmu
 
-import build_native
-import fmu_catalog
-from native_build import compiler, sources
+from harness.fmu_build import native as build_native
+from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build.native_stages import compiler, sources
 
 MODELS = [m.model_identifier for m in build_native.models()]
 STOP, STEP = 0.2, 1e-3  # s: a short run of each FMU on smooth inputs

@@ -6,7 +6,7 @@ import matplotlib
 import numpy as np
 import pytest
 
-import build_native
+from harness.fmu_build import native as build_native
 
 from harness import cases, progress
 from harness.cli import main as cli_main

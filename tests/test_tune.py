@@ -19,8 +19,8 @@ import pytest
 
 optuna = pytest.importorskip("optuna")
 
-import build_fmu  # noqa: E402
-import fmu_catalog  # noqa: E402
+from harness.fmu_build import builder as build_fmu  # noqa: E402
+from harness.fmu_build import catalog as fmu_catalog  # noqa: E402
 from harness import scenario as scenarios  # noqa: E402
 from harness import variants  # noqa: E402
 from harness.cli import main as cli_main  # noqa: E402
@@ -35,7 +35,7 @@ CONTROLLER = "AdaptiveFuzzyController"
 
 @pytest.fixture(scope="module")
 def edition():
-    import build_native
+    from harness.fmu_build import native as build_native
 
     return "native" if build_native.compiler_available() else "python"
 
@@ -127,8 +127,8 @@ def test_the_hurwitz_fraction_gives_exactly_the_hurwitz_gains(order):
 
 
 def test_the_search_ranges_reach_neither_the_model_description_nor_the_c_tables(monkeypatch):
-    from native_build.description import fmi2_description
-    from native_build.header import variables_header
+    from harness.fmu_build.native_stages.description import fmi2_description
+    from harness.fmu_build.native_stages.header import variables_header
 
     cls = build_fmu.model_class(CONTROLLER)
     with_ranges_xml = fmi2_description(CONTROLLER, "{guid}")

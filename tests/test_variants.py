@@ -4,7 +4,7 @@ from pathlib import Path
 
 from fmu_src import afc_math
 
-import fmu_catalog
+from harness.fmu_build import catalog as fmu_catalog
 from harness import variants
 from harness.studies import claims, step_study, tables
 

@@ -14,10 +14,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def shipped_sources() -> set:
     """The project's files a wheel must hold (what git tracks under the packages, but the tests)."""
-    tracked = subprocess.run(["git", "ls-files", "fmu_src", "plants", "native_build", "harness/*.py", "harness/*.c",
+    tracked = subprocess.run(["git", "ls-files", "fmu_src", "plants", "harness/fmu_build", "harness/*.py", "harness/*.c",
                               "harness/*.h", "harness/scenarios", "harness/references"], cwd=ROOT,
                              capture_output=True, text=True, check=True).stdout.split()
-    return set(tracked) | {"build_fmu.py", "build_native.py", "fmu_catalog.py", "fmu_staging.py", "c_toolchain.py"}
+    return set(tracked)
 
 
 @pytest.fixture(scope="module")
@@ -44,3 +44,10 @@ def test_a_plant_folder_is_found_as_a_package(wheel_names):
     assert len(folders) >= 4
     for name in folders:
         assert {f"plants/{name}/fmu.py", f"plants/{name}/model.c"} <= wheel_names, name
+
+
+def test_the_wheel_puts_only_the_projects_packages_at_the_top_of_site_packages(wheel_names):
+    """The builds live in harness/fmu_build/: pip puts no top-level module of ours beside the packages
+    (build_fmu.py is the checkout's command, not an installed module)."""
+    top = {name.split("/")[0] for name in wheel_names if not name.split("/")[0].endswith(".dist-info")}
+    assert top == {"fmu_src", "plants", "harness"}, f"top-level names in the wheel: {sorted(top)}"

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-import build_native
+from harness.fmu_build import native as build_native
 from harness import cli
 from harness.studies import work_precision as wp
 

@@ -29,11 +29,11 @@ import tempfile
 import time as clock
 from pathlib import Path
 
-import build_fmu
-import build_native
-import c_toolchain
-import fmu_catalog
-from fmu_staging import staged_module
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
+from harness.fmu_build import toolchain as c_toolchain
+from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build.staging import staged_module
 
 from .. import cli_args, master_loop, variants
 from .. import scenario as scenarios
@@ -74,7 +74,7 @@ def build_null_fmus(folder: Path) -> dict:
     paths = {}
     for instance, (identifier, shape) in NULL_FMUS.items():
         source = fmu_catalog.fmu(shape)
-        script = folder / f"null_{identifier.lower()}_fmu.py"  # a unique module name per FMU (fmu_staging.py)
+        script = folder / f"null_{identifier.lower()}_fmu.py"  # a unique module name per FMU (harness/fmu_build/staging.py)
         script.write_text(NULL_SCRIPT.format(shape=shape, module=staged_module(source.script), identifier=identifier))
         paths[instance] = build_fmu.build_script(script, folder / f"{identifier}.fmu",
                                                  (source.script, *source.project_files))

@@ -74,7 +74,7 @@ import numpy as np
 from fmpy.ssp.simulation import simulate_ssp
 from fmpy.ssp.ssd import Parameter, ParameterSet, find_components, read_ssd
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 
 from .. import cli_args, variants
 from .. import scenario as scenarios

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from itertools import permutations
 from typing import Callable
 
-import build_native
+from harness.fmu_build import native as build_native
 
 from ..me_master import DEFAULT_RTOL
 from . import omsimulator

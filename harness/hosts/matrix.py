@@ -29,8 +29,8 @@ import tempfile
 import time as clock
 from pathlib import Path
 
-import build_fmu
-import build_native
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
 
 from .. import cli_args, variants
 from .. import scenario as scenarios

@@ -50,7 +50,7 @@ import zipfile
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 
 from .. import cli_args, variants
 from .. import scenario as scenarios

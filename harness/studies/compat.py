@@ -44,10 +44,10 @@ from fmpy.cross_check import validate_result
 from fmpy.cross_check.validate_vendor_repo import (read_csv, validate_cross_check_result, validate_repo,
                                                    validate_test_fmu)
 
-import build_fmu
-import build_native
-import fmu_catalog
-from native_build import ls_ref
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import native as build_native
+from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build.native_stages import ls_ref
 
 from .. import cli_args
 from .. import scenario as scenarios
@@ -166,7 +166,7 @@ def ls_ref_experiment(experiment: Experiment) -> ls_ref.Experiment:
 
 
 def write_ls_ref_experiments(models=None) -> list:
-    """Store every FMU's experiment where the builds read it (native_build/ls_ref_experiments/)."""
+    """Store every FMU's experiment where the builds read it (harness/fmu_build/native_stages/ls_ref_experiments/)."""
     models = list(models or [row.model_identifier for row in fmu_catalog.FMUS])
     experiments = closed_loop_experiments(models, build_fmu.ensure_built(edition="python"))
     stored = [ls_ref_experiment(experiments[model]) for model in models]
@@ -555,5 +555,5 @@ def register(commands):
     parser.add_argument("--jobs", type=cli_args.positive_int, help="fmpy processes at once (default: every core)")
     parser.add_argument("--ls-ref-experiments", action="store_true",
                         help="only store the FMUs' experiments where the builds embed them as FMI-LS-REF "
-                             "(native_build/ls_ref_experiments/)")
+                             "(harness/fmu_build/native_stages/ls_ref_experiments/)")
     parser.set_defaults(handler=compat_command)

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 
 from .. import cli_args, me_master, variants
 from .. import scenario as scenarios

@@ -33,8 +33,8 @@ import time as clock
 from dataclasses import dataclass
 from pathlib import Path
 
-import build_fmu
-import fmu_catalog
+from harness.fmu_build import builder as build_fmu
+from harness.fmu_build import catalog as fmu_catalog
 
 from .. import cli_args
 from ..cases import parallel_map

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-import fmu_catalog
+from harness.fmu_build import catalog as fmu_catalog
 from fmu_src import afc_math
 from plants import plant_integration
 from plants import registry as plant_registry

@@ -35,7 +35,7 @@ import time as clock
 from dataclasses import dataclass
 from pathlib import Path
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 
 from .. import cli_args, termination, variants
 from ..cases import STATUSES, Progress, one_line

@@ -28,7 +28,7 @@ import sys
 import time as clock
 from pathlib import Path
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 
 from .. import cli_args, variants
 from .. import scenario as scenarios

@@ -13,8 +13,8 @@ import tempfile
 import time as clock
 from pathlib import Path
 
-import c_toolchain
-import fmu_catalog
+from harness.fmu_build import toolchain as c_toolchain
+from harness.fmu_build import catalog as fmu_catalog
 
 from ... import cli_args, variants
 from ... import scenario as scenarios

@@ -7,7 +7,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 
 from ... import cli_args, variants
 from ... import scenario as scenarios

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import build_fmu
+from harness.fmu_build import builder as build_fmu
 from fmu_src import afc_math
 from fmu_src.afc_slave_base import Tuning
 

@@ -10,8 +10,8 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-import fmu_catalog
-from native_build import LAYER, ls_ref
+from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build.native_stages import LAYER, ls_ref
 
 
 def atomic_write(path: Path, data: bytes) -> None:
@@ -63,7 +63,7 @@ def zip_archive(files: dict[str, bytes]) -> bytes:
 
 
 def embed_ls_ref(fmu: Path, model: str) -> None:
-    """Append the FMI-LS-REF files (native_build.ls_ref) to a built FMU archive in place: the pythonfmu
+    """Append the FMI-LS-REF files (harness.fmu_build.native_stages.ls_ref) to a built FMU archive in place: the pythonfmu
     edition's build, whose archive comes from pythonfmu."""
     with zipfile.ZipFile(fmu) as archive:
         files = {name: archive.read(name) for name in archive.namelist() if not name.endswith("/")}
@@ -71,7 +71,7 @@ def embed_ls_ref(fmu: Path, model: str) -> None:
         write_entries(archive, ls_ref.ls_ref_files(ls_ref.load(model), files))
 
 
-if __name__ == "__main__":  # python -m native_build.package FMU MODEL (build_fmu.py: in a fresh interpreter)
+if __name__ == "__main__":  # python -m harness.fmu_build.native_stages.package FMU MODEL (build_fmu.py: in a fresh interpreter)
     embed_ls_ref(Path(sys.argv[1]), sys.argv[2])
 
 
@@ -80,7 +80,7 @@ def fmu_files(model: fmu_catalog.FmuSource, descriptions: dict[int, bytes], head
               targets, generated: dict[int, dict[str, bytes]] | None = None) -> dict[int, dict[str, bytes]]:
     """{FMI version: {archive path: bytes}}: the description, the sources (the layer, the model's C
     files, its generated header), each target's binary (``binaries[(version, target)]``), the
-    ``generated`` files of each version (native_build.sources: what compiles the sources) and, where
+    ``generated`` files of each version (harness.fmu_build.native_stages.sources: what compiles the sources) and, where
     the FMU runs on this machine, its FMI-LS-REF files."""
     name = model.model_identifier
     sources = {f"sources/{fmu_catalog.archive_name(p)}": p.read_bytes() for p in (*LAYER, *model.c_sources, *model.c_headers, header)}
@@ -93,7 +93,7 @@ def fmu_files(model: fmu_catalog.FmuSource, descriptions: dict[int, bytes], head
         files[3][f"binaries/{target.fmi3_folder}/{name}{target.extension}"] = binaries[(3, target)].read_bytes()
     if darwin:
         files[2][f"binaries/darwin64/{name}.dylib"] = fat_macho(darwin)
-    for version in (2, 3):  # FMI-LS-REF: the reference is this machine's run of the FMU (native_build.ls_ref)
+    for version in (2, 3):  # FMI-LS-REF: the reference is this machine's run of the FMU (harness.fmu_build.native_stages.ls_ref)
         if ls_ref.runs_here(files[version], version):
             files[version].update(ls_ref.ls_ref_files(ls_ref.load(name), files[version]))
     return files

@@ -10,12 +10,12 @@ import uuid
 from xml.dom import minidom
 from xml.etree import ElementTree as ET
 
-import fmu_catalog
-from fmu_catalog import model_class
-from native_build import LAYER, ROOT
-from native_build.model_exchange import add_model_exchange, event_indicator_elements, model_exchange
+from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build.catalog import model_class
+from harness.fmu_build.native_stages import LAYER, ROOT
+from harness.fmu_build.native_stages.model_exchange import add_model_exchange, event_indicator_elements, model_exchange
 
-GENERATION_TOOL = "afc-fmi native edition (build_native.py)"
+GENERATION_TOOL = "afc-fmi native edition (harness/fmu_build/native.py)"
 
 
 def model_sources(model_identifier: str) -> tuple:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from c_toolchain import NativeBuildError
+from harness.fmu_build.toolchain import NativeBuildError
 
 
 @dataclass(frozen=True)

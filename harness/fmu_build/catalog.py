@@ -1,4 +1,4 @@
-"""The FMUs of the project, declared once for both builds (build_fmu.py, build_native.py) and the harness.
+"""The FMUs of the project, declared once for both builds (build_fmu.py, harness/fmu_build/native.py) and the harness.
 
 One row per FMU: its model identifier, its pythonfmu script and the project files that travel with
 it (the reference edition), its C sources and headers (the native edition).  The controller's row
@@ -15,10 +15,10 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from fmu_staging import module_name
+from harness.fmu_build.staging import module_name
 from plants import registry as plant_registry
 
-ROOT = Path(__file__).resolve().parent
+ROOT = Path(__file__).resolve().parents[2]  # the repository (harness/fmu_build/ is two levels down)
 FMU_SRC = ROOT / "fmu_src"
 BASE = FMU_SRC / "afc_slave_base.py"  # the slave base class every pythonfmu FMU carries
 DECLARATION = FMU_SRC / "afc_declaration.py"  # what a script declares beside its table (every FMU carries it)
@@ -36,7 +36,7 @@ EDITION_VARIABLE = "AFC_EDITION"
 @dataclass(frozen=True)
 class FmuSource:
     model_identifier: str
-    script: Path  # the pythonfmu script and declaration (fmu_staging.py gives it a unique name inside the FMU)
+    script: Path  # the pythonfmu script and declaration (harness/fmu_build/staging.py gives it a unique name inside the FMU)
     project_files: tuple[Path, ...]  # what travels with the script (the base class first)
     c_sources: tuple[Path, ...] = ()  # compiled with fmu_src/fmi_layer.c into the native edition
     c_headers: tuple[Path, ...] = ()

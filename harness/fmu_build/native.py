@@ -1,10 +1,9 @@
 """Build the native edition of the FMUs: the same four models in C, FMI 2.0 and FMI 3.0.
 
-    python build_fmu.py --edition native            # via the project's build script
-    python build_native.py [--targets linux64,win64,darwin64,aarch64-linux] [--force]
+    python build_fmu.py --edition native [--targets linux64,win64,darwin64,aarch64-linux] [--force]
 
 From each FMU's declaration table (the ``VARIABLES`` of its pythonfmu class) the
-stages of :mod:`native_build` (one module each) generate
+stages of :mod:`harness.fmu_build.native_stages` (one module each) generate
 
 * the FMI 2.0 modelDescription.xml: pythonfmu's own ``to_xml`` of the class (the very
   description of the pythonfmu edition), with the native FMU's GUID and capabilities, plus
@@ -47,26 +46,26 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-import c_toolchain
-import fmu_catalog
-from c_toolchain import WORK_DIR, NativeBuildError, compiler_available
-from fmu_catalog import FMI3_DIR, NATIVE_DIR, FmuSource
-from native_build import LAYER, ROOT, ls_ref
-from native_build.compiler import compile_binary
-from native_build.description import fmi2_description, fmi3_description, model_guid, pretty_xml
-from native_build.header import variables_header
-from native_build.package import atomic_write, fmu_files, zip_archive
-from native_build.sources import add_source_files, source_files
-from native_build.targets import PLATFORMS, selected_targets
+from harness.fmu_build import toolchain as c_toolchain
+from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build.toolchain import WORK_DIR, NativeBuildError, compiler_available
+from harness.fmu_build.catalog import FMI3_DIR, NATIVE_DIR, FmuSource
+from harness.fmu_build.native_stages import LAYER, ROOT, ls_ref
+from harness.fmu_build.native_stages.compiler import compile_binary
+from harness.fmu_build.native_stages.description import fmi2_description, fmi3_description, model_guid, pretty_xml
+from harness.fmu_build.native_stages.header import variables_header
+from harness.fmu_build.native_stages.package import atomic_write, fmu_files, zip_archive
+from harness.fmu_build.native_stages.sources import add_source_files, source_files
+from harness.fmu_build.native_stages.targets import PLATFORMS, selected_targets
 from plants import registry as plant_registry
 
 __all__ = ["PLATFORMS", "NativeBuildError", "WORK_DIR", "build_model", "compiler_available", "ensure_built",
            "fmu_paths", "main", "models"]
-STAGES = tuple(sorted((ROOT / "native_build").glob("*.py")))  # the build's own modules: inputs of every FMU
+STAGES = tuple(sorted((Path(__file__).parent / "native_stages").glob("*.py")))  # the build's own modules: inputs of every FMU
 
 
 def models() -> tuple[FmuSource, ...]:
-    """The FMUs of fmu_catalog.py that have a C edition (their ``c_sources``, compiled with the layer)."""
+    """The FMUs of harness/fmu_build/catalog.py that have a C edition (their ``c_sources``, compiled with the layer)."""
     return tuple(m for m in fmu_catalog.FMUS if m.c_sources)
 
 

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import fmpy
 
-import c_toolchain
-from c_toolchain import CFLAGS, WORK_DIR, NativeBuildError, compile_cached
-from fmu_catalog import FmuSource, archive_name
-from native_build import LAYER, ROOT
-from native_build.targets import Target
+from harness.fmu_build import toolchain as c_toolchain
+from harness.fmu_build.toolchain import CFLAGS, WORK_DIR, NativeBuildError, compile_cached
+from harness.fmu_build.catalog import FmuSource, archive_name
+from harness.fmu_build.native_stages import LAYER, ROOT
+from harness.fmu_build.native_stages.targets import Target
 
 
 def fmi_headers() -> Path:

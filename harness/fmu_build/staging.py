@@ -14,7 +14,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent
+ROOT = Path(__file__).resolve().parents[2]  # the repository (harness/fmu_build/ is two levels down)
 PACKAGES = ("fmu_src", "plants")  # the packages whose modules travel inside FMUs
 
 

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from xml.etree import ElementTree as ET
 
-import fmu_catalog
-from native_build import LAYER
-from native_build.description import pretty_xml
+from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build.native_stages import LAYER
+from harness.fmu_build.native_stages.description import pretty_xml
 
 FMI2_UNIT = "fmi2_layer.c"
 LANGUAGE = "C11"  # c_toolchain.CFLAGS: -std=c11

@@ -4,7 +4,7 @@ It holds the manifest ``fmi-ls-manifest.xml`` (one experiment: start, stop, step
 stimuli and the references), the stimuli ``<Model>_in.csv`` and the reference result
 ``<Model>_ref.csv`` (time, then the outputs). The experiment is the one of the compatibility
 information (``python -m harness compat``): the FMU's connected inputs as our master set them in a
-closed loop, stored once in ``native_build/ls_ref_experiments/`` by ``python -m harness compat
+closed loop, stored once in ``harness/fmu_build/native_stages/ls_ref_experiments/`` by ``python -m harness compat
 --ls-ref-experiments``. The reference is the FMU itself simulated by fmpy in co-simulation on those
 inputs, as an importer replays them; ``tolerance`` is the largest deviation of an output from the
 reference allowed, relative to the output's range in the reference (the cross-check's measure).
@@ -25,12 +25,12 @@ from fmpy import platform_tuple as FMPY_PLATFORM_TUPLE
 from fmpy import simulate_fmu
 from fmpy.util import read_csv
 
-from native_build import ROOT
-from native_build.description import pretty_xml
+from harness.fmu_build.native_stages import ROOT
+from harness.fmu_build.native_stages.description import pretty_xml
 
 FOLDER = "extra/org.fmi-standard.fmi-ls-ref"
 MANIFEST = f"{FOLDER}/fmi-ls-manifest.xml"
-EXPERIMENTS = ROOT / "native_build" / "ls_ref_experiments"
+EXPERIMENTS = Path(__file__).parent / "ls_ref_experiments"
 EXPERIMENTS_FILE = EXPERIMENTS / "experiments.json"
 LS_NAMESPACE = "http://fmi-standard.org/fmi-ls-manifest"
 LS_VERSION = "1.0.0-rc.1"

@@ -1,6 +1,6 @@
 """The C toolchain: zig's C compiler from the ziglang wheel (``pip install -e '.[native]'``).
 
-Used by the native edition's build (build_native.py: the FMUs' shared libraries for every
+Used by the native edition's build (harness/fmu_build/native.py: the FMUs' shared libraries for every
 platform) and, through :func:`host_library`, by the master's compiled loop (harness/master_loop.py)
 and by the tests of the C math: one shared library for the machine running the harness, cached in
 build/native/obj by the hash of its sources, headers and flags.  Imports no project module.
@@ -16,7 +16,7 @@ import tempfile
 from importlib import metadata
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent
+ROOT = Path(__file__).resolve().parents[2]  # the repository (harness/fmu_build/ is two levels down)
 WORK_DIR = ROOT / "build" / "native"  # object cache (obj/) and zig's own cache (zig-cache/)
 # IEEE arithmetic exactly as written (no fused multiply-add, no fast-math): the native
 # results then match the Python edition's to the last bit where the libm agrees.

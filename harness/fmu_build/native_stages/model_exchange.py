@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from xml.etree import ElementTree as ET
 
-from c_toolchain import NativeBuildError
-from fmu_catalog import ROOT, declaration, fmu, model_class
+from harness.fmu_build.toolchain import NativeBuildError
+from harness.fmu_build.catalog import ROOT, declaration, fmu, model_class
 from fmu_src.afc_declaration import Derivative, EventIndicator, ModelExchange
 from fmu_src.afc_slave_base import _unknown, initial_dependencies
 
