@@ -52,12 +52,13 @@ LOOP_FORBIDDEN = (NATIVE_BUILD, NATIVE_STAGES, BUILDER, f"{BUILD}.catalog", f"{B
 CHAINS = {
     "harness.studies.tune": ("errors", "space", "objective", "candidate", "config", "storage", "loop",
                              "scenario_file", "summary", "report", "comparison", "study", "command_line"),
+    "harness.studies.sweep": ("grid", "csv_rows", "executors", "heatmap", "run", "command_line"),
     "harness.hosts": ("trajectory", "console_capture", "plain_fmpy", "host_runners", "host_registry", "matrix_row",
                       "matrix_prose", "matrix_report", "matrix"),
     NATIVE_STAGES: ("targets", "model_exchange", "description", "header", "compiler", "sources", "ls_ref", "package"),
 }
 #: packages whose every module is in their chain (harness/hosts/ holds other hosts' bindings beside its chain)
-WHOLE_CHAINS = ("harness.studies.tune", NATIVE_STAGES)
+WHOLE_CHAINS = ("harness.studies.tune", "harness.studies.sweep", NATIVE_STAGES)
 
 
 @dataclass(frozen=True)

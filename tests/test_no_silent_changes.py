@@ -9,7 +9,8 @@ import pytest
 
 from harness.fmu_build import builder as build_fmu
 from harness import scenario as scenarios
-from harness.studies import sweep_executors, sweep_grid
+from harness.studies.sweep import executors as sweep_executors
+from harness.studies.sweep import grid as sweep_grid
 from harness.cases import Case, run_case
 from harness.cli import main as cli_main
 from harness.scenario import ScenarioError

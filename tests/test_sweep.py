@@ -12,7 +12,11 @@ import numpy as np
 import pytest
 
 from harness import variants
-from harness.studies import sweep, sweep_csv, sweep_executors, sweep_grid, sweep_heatmap
+from harness.studies import sweep
+from harness.studies.sweep import csv_rows as sweep_csv
+from harness.studies.sweep import executors as sweep_executors
+from harness.studies.sweep import grid as sweep_grid
+from harness.studies.sweep import heatmap as sweep_heatmap
 from harness.cli import main as cli_main
 from harness.scenario import ScenarioError
 

@@ -16,10 +16,10 @@ import tempfile
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from ..cases import Case, run_case
-from ..scenario import ScenarioError
-from ..scores import SCORE_KEYS
-from .sweep_grid import SweepPlan
+from ...cases import Case, run_case
+from ...scenario import ScenarioError
+from ...scores import SCORE_KEYS
+from .grid import SweepPlan
 
 SCHEDULER_TIMEOUT = "20s"  # how long to try reaching a Dask scheduler
 
