@@ -42,7 +42,9 @@ TOOLCHAIN = f"{BUILD}.toolchain"
 CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harness.scenario", "harness.variants",
         "harness.fmi", "harness.scenario_checks", "harness.master", "harness.compiled_loop", "harness.loop_interface",
         "harness.master_loop", "harness.scores", "harness.cases", "harness.units", "harness.me_master",
-        "harness.me_loop", "harness.cvode", "harness.scenario_toml", "harness.progress", "harness.termination"}
+        "harness.me_loop", "harness.cvode", "harness.scenario_toml", "harness.progress", "harness.termination",
+        "harness.executors", "harness.executors.tasks", "harness.executors.local_pool", "harness.executors.dask_pool",
+        "harness.executors.choose"}
 COMPOSITION_ROOT = "harness.cli"
 STUDIES, HOSTS = "harness.studies", "harness.hosts"
 #: what the master's compiled loop may never reach, directly or through other modules
@@ -52,13 +54,14 @@ LOOP_FORBIDDEN = (NATIVE_BUILD, NATIVE_STAGES, BUILDER, f"{BUILD}.catalog", f"{B
 CHAINS = {
     "harness.studies.tune": ("errors", "space", "objective", "candidate", "config", "storage", "loop",
                              "scenario_file", "summary", "report", "comparison", "study", "command_line"),
+    "harness.executors": ("tasks", "local_pool", "dask_pool", "choose"),
     "harness.studies.sweep": ("grid", "csv_rows", "executors", "heatmap", "run", "command_line"),
     "harness.hosts": ("trajectory", "console_capture", "plain_fmpy", "host_runners", "host_registry", "matrix_row",
                       "matrix_prose", "matrix_report", "matrix"),
     NATIVE_STAGES: ("targets", "model_exchange", "description", "header", "compiler", "sources", "ls_ref", "package"),
 }
 #: packages whose every module is in their chain (harness/hosts/ holds other hosts' bindings beside its chain)
-WHOLE_CHAINS = ("harness.studies.tune", "harness.studies.sweep", NATIVE_STAGES)
+WHOLE_CHAINS = ("harness.executors", "harness.studies.tune", "harness.studies.sweep", NATIVE_STAGES)
 
 
 @dataclass(frozen=True)

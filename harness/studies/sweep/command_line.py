@@ -63,10 +63,16 @@ def sweep_command(args) -> int:
     if summary.lost:
         print(f"error: {summary.lost} point(s) not run, their worker was lost ({summary.lost_reason}); "
               "run the same command to retry them", file=sys.stderr)
-    if args.apply and not (summary.interrupted or summary.lost):
+    if summary.scheduler_lost:
+        missing = summary.total - summary.done_before - summary.computed - summary.lost
+        print(f"error: {summary.scheduler_lost}: {missing} point(s) not run, the finished ones are in "
+              f"{summary.csv_path}; run the same command to resume", file=sys.stderr)
+    if args.apply and not (summary.interrupted or summary.lost or summary.scheduler_lost):
         for path in apply_to_docs(plan, summary):
             print(f"  applied  {path}")
-    return summary.interrupt_status if summary.interrupted else 1 if summary.lost else 0
+    if summary.interrupted:
+        return summary.interrupt_status
+    return cli_args.FAILED_EXIT if summary.lost or summary.scheduler_lost else 0
 
 
 def plan_fmu_paths(plan: SweepPlan) -> dict:

@@ -3,16 +3,15 @@ its row streams to the CSV as it finishes, the heat map is drawn at the end (:fu
 from __future__ import annotations
 
 import json
-import os
-import signal
 import time as clock
 from dataclasses import dataclass
 from pathlib import Path
 
 from ... import termination
 from ...cases import STATUSES, Progress, one_line
+from ...executors import SchedulerLost, open_executor
 from .csv_rows import CSV_NAME, SETTINGS_NAME, CsvSink, check_settings, read_rows
-from .executors import DaskPool, LocalPool, point_task
+from .executors import point_files, point_task, run_point
 from .grid import SweepPlan, point_key
 from .heatmap import plot_heatmap
 
@@ -32,6 +31,7 @@ class SweepSummary:
     lost: int = 0  # points whose worker was lost (crash, killed worker): not recorded, rerun on resume
     lost_reason: str = ""
     interrupt_status: int = 0  # interrupted: 130 (Ctrl-C) or 143 (SIGTERM), harness/termination.py
+    scheduler_lost: str = ""  # the Dask scheduler went away mid-sweep (one line): the rest is not run
 
 
 def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | None = None,
@@ -39,10 +39,11 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
     """Run every point of the plan not yet in ``out/sweep.csv``; stream rows; draw the heat map.
 
     ``on_row(row, done)`` is called after each row is written (tests interrupt
-    the sweep from there by raising KeyboardInterrupt).  A point whose worker
-    is lost (a crash in an FMU, a killed Dask worker) is not recorded: the
-    summary counts it and a resume runs it again.  ``point_function``
-    replaces ``run_point`` on the local pool (tests).
+    the sweep from there by raising KeyboardInterrupt).  A point whose worker is lost
+    is run again by the executor; one lost for good (its worker died again while it ran alone,
+    harness/executors/local_pool.py) is not recorded: the summary counts it and a resume runs it
+    again.  The Dask scheduler gone stops the sweep with what finished recorded.  ``point_function``
+    replaces ``run_point`` (tests; a module-level function of (task, files)).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -58,27 +59,31 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
                                          "controllers": list(plan.controllers), "metric": plan.metric}, indent=2))
     sink = CsvSink(csv_path, plan.names, kept)
     wall_start = clock.perf_counter()
-    interrupted, computed, pool, lost, lost_reason, interrupt_status = False, 0, None, 0, "", 0
+    interrupted, computed, executor, lost, lost_reason, interrupt_status = False, 0, None, 0, "", 0
+    scheduler_lost, where = "", "nothing to run"
     if todo:
         try:
-            pool = (DaskPool(scheduler, plan) if scheduler else
-                    LocalPool(min(jobs or os.cpu_count() or 1, len(todo)), point_function))
+            executor = open_executor(jobs, scheduler, files=point_files(plan), tasks=len(todo))
+            where = executor.describe()
         except BaseException:
             sink.close()
             raise
     bar = Progress(len(wanted), f"sweep {plan.scenario.name}", unit="pt", enabled=progress, initial=done_before,
                    dynamic_ncols=True)  # a bar on a terminal, lines elsewhere
-    previous_sigterm = _sigterm_as_interrupt()
+    function = point_function or run_point
     try:
-        if todo:
+        with termination.sigterm_as_interrupt():
             troubled = 0
-            for row, error in pool.run([point_task(plan, c, v) for c, v in todo]):
+            for controller, values in todo:
+                executor.submit(function, point_task(plan, controller, values))
+            for finished in (executor.as_completed() if executor else ()):
                 bar.update(1)
-                if error is not None:
+                if finished.error is not None:
                     lost += 1
-                    lost_reason = lost_reason or one_line(f"{type(error).__name__}: {error}", 300)
+                    lost_reason = lost_reason or one_line(f"{type(finished.error).__name__}: {finished.error}", 300)
                     bar.set_postfix(not_ok=troubled, lost=lost)
                     continue
+                row = finished.value
                 sink.write(row)
                 computed += 1
                 troubled += row["status"] != "ok"
@@ -88,13 +93,13 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
                     on_row(row, computed)
     except KeyboardInterrupt as interrupt:
         interrupted, interrupt_status = True, termination.exit_status(interrupt)
+    except SchedulerLost as error:
+        scheduler_lost = str(error)
     finally:
-        if previous_sigterm is not None:
-            signal.signal(signal.SIGTERM, previous_sigterm)
         bar.close()
         sink.close()
-        if pool is not None:
-            pool.close(cancel=interrupted)
+        if executor is not None:
+            executor.close(cancel=interrupted or bool(scheduler_lost))
     wall_s = clock.perf_counter() - wall_start
     rows = current_rows(plan, read_rows(csv_path, plan.names))
     counts = {c: {s: 0 for s in STATUSES} for c in plan.controllers}
@@ -104,19 +109,7 @@ def run_sweep(plan: SweepPlan, out, jobs: int | None = None, scheduler: str | No
     if plot and rows:
         heatmap_path = plot_heatmap(plan, rows, out / f"heatmap_{plan.metric}.png")
     return SweepSummary(csv_path, heatmap_path, len(wanted), done_before, computed, counts, wall_s,
-                        interrupted, pool.describe() if pool else "nothing to run", lost, lost_reason,
-                        interrupt_status)
-
-
-def _sigterm_as_interrupt():
-    """SIGTERM stops the sweep as Ctrl-C does (the previous handler, or None off the main thread)."""
-    def handler(signum, frame):
-        raise termination.Terminated()
-
-    try:
-        return signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # signals can only be handled in the main thread
-        return None
+                        interrupted, where, lost, lost_reason, interrupt_status, scheduler_lost)
 
 
 def current_rows(plan: SweepPlan, rows: list) -> list:
