@@ -187,6 +187,11 @@ SLOW = {
         "test_fmus_extracted_once_per_process_are_shared_renewed_and_removed",
         "test_the_driven_helper_removes_its_extraction",),
     "test_tune.py": ("test_a_best_that_moves_at_half_the_step_is_pruned_not_reported",
+        "test_a_database_server_that_cannot_be_used_is_one_line_exit_2_before_any_trial",
+        "test_a_full_disk_mid_study_is_one_line_naming_the_database_and_keeps_the_trials",
+        "test_a_run_killed_mid_trial_is_resumed_by_another_through_its_heartbeat",
+        "test_another_seed_is_another_study_and_a_shared_study_says_whose_seed_it_samples",
+        "test_the_password_reaches_no_terminal_log_or_file",
         "test_a_constraint_keeps_a_candidate_that_misses_it_from_being_best",
         "test_a_killed_run_resumes_with_every_finished_trial_kept",
         "test_a_study_writes_a_scenario_that_run_and_regress_take_and_run_reproduces_its_score_exactly",
@@ -225,6 +230,32 @@ def fmu_paths():
     from harness.fmu_build import builder as build_fmu
 
     return build_fmu.ensure_built()
+
+
+@pytest.fixture(scope="session")
+def postgres():
+    """A throwaway PostgreSQL server on 127.0.0.1 with a password, for the session (tests/cluster_helpers.py);
+    skipped only where PostgreSQL or its driver is missing (.ci/run installs Debian's package, the test
+    extra psycopg)."""
+    from tests.cluster_helpers import PostgresServer, postgres_bin
+
+    bin_dir = postgres_bin()
+    if bin_dir is None:
+        pytest.skip("PostgreSQL is not installed (apt-get install postgresql; .ci/run installs it)")
+    pytest.importorskip("psycopg", reason="the PostgreSQL driver of the postgres extra")
+    with PostgresServer(bin_dir) as server:
+        yield server
+
+
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1, one thread each, started with the
+    commands docs/studies.md prints (tests/cluster_helpers.py) and stopped after the test."""
+    pytest.importorskip("distributed", reason="the cluster extra")
+    from tests.cluster_helpers import DaskCluster
+
+    with DaskCluster(2, tmp_path / "dask") as cluster:
+        yield cluster
 
 
 @pytest.fixture(scope="session")
