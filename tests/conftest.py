@@ -186,6 +186,7 @@ SLOW = {
     "test_temp_cleanup.py": ("test_an_ecos_run_leaves_nothing",
         "test_fmus_extracted_once_per_process_are_shared_renewed_and_removed",
         "test_the_driven_helper_removes_its_extraction",),
+    "test_termination.py": ("test_sigkill_of_the_command_leaves_no_pool_worker_behind",),
     "test_tune.py": ("test_a_best_that_moves_at_half_the_step_is_pruned_not_reported",
         "test_a_database_server_that_cannot_be_used_is_one_line_exit_2_before_any_trial",
         "test_a_full_disk_mid_study_is_one_line_naming_the_database_and_keeps_the_trials",
