@@ -75,7 +75,10 @@ _STOPPING = False
 
 
 def _stop_worker(signum, frame):
+    """The first SIGTERM unwinds the worker where it is; a later one (the clean-up under way) is let be."""
     global _STOPPING
+    if _STOPPING:
+        return
     _STOPPING = True
     raise WorkerStopped(128 + signum)
 

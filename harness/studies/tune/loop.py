@@ -165,6 +165,7 @@ def run_study(prepared: Prepared, study, log=None, executor=None) -> dict:
     x0 = sample_of(prepared.dimensions, prepared.fixed) if config.sampler == "cmaes" else None
     pending, in_flight = [], {}
     ran, began, simulated, stale_checked = 0, clock.perf_counter(), 0.0, -math.inf
+    interrupted = False
     try:
         while True:
             while len(in_flight) < executor.slots:
@@ -222,6 +223,7 @@ def run_study(prepared: Prepared, study, log=None, executor=None) -> dict:
                 log(_progress_line(trial, "complete" if state == TrialState.COMPLETE else "pruned", outcome,
                                    config.objective, best, config.trials))
     except BaseException:
+        interrupted = True
         for trial in pending:  # interrupted: these run again next time, with the same parameters
             try:
                 study._storage.set_trial_user_attr(trial._trial_id, "outcome", {
@@ -234,5 +236,5 @@ def run_study(prepared: Prepared, study, log=None, executor=None) -> dict:
         raise
     finally:
         heartbeat.close()
-        executor.close(cancel=True)  # nothing of ours runs beyond the loop (an interrupt stops the workers)
+        executor.close(cancel=interrupted)  # an interrupt or an error stops the workers where they are
     return {"ran": ran, "wall_s": clock.perf_counter() - began, "simulated_s": simulated, "executor": where}

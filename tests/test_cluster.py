@@ -1,0 +1,156 @@
+"""The studies on a Dask cluster of separate processes, as a user runs one: ``dask scheduler`` and two ``dask
+worker`` processes started with docs/studies.md's commands (tests/cluster_helpers.py, the ``dask_cluster``
+fixture).  A sweep and a short tune give the local pool's rows; a worker killed with SIGKILL mid-sweep loses
+nothing and counts nothing twice; the scheduler gone mid-run is one line, and the run resumes.
+"""
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from harness.cli import main as cli_main
+from harness.executors import tasks
+from harness.studies import sweep
+from tests.cluster_helpers import SCHEDULER_COMMAND, WORKER_COMMAND
+
+pytest.importorskip("distributed")
+ROOT = Path(__file__).resolve().parents[1]
+# short horizon, coarse step: a point takes ~0.1 s; gamma = 3e5 diverges for some points (rows with a reason)
+SMALL = ["pendulum_case2", "--controller", "all", "--grid", "plant.mp=0.1:1:2", "--grid", "controller.gamma=300,300000",
+         "--stop", "0.5", "--step", "1e-3", "--no-progress"]
+# points of about a second each in the pythonfmu edition: long enough to kill something mid-sweep
+LONG_GRIDS = ["plant.mp=0.1:2:6", "plant.dist_gain=0,2"]
+
+
+def rows_of(path) -> dict:
+    """{(controller, grid values...): CSV cells without the wall time}; a point twice is an error."""
+    with open(path, newline="") as stream:
+        table = list(csv.reader(stream))
+    header, body = table[0], table[1:]
+    wall = header.index("wall_s")
+    names = header[1:header.index("ts")]
+    keyed = {(r[0], *r[1:1 + len(names)]): r[:wall] + r[wall + 1:] for r in body}
+    assert len(keyed) == len(body), "a point appears twice"
+    return keyed
+
+
+def test_the_docs_print_the_commands_the_tests_start():
+    studies = (ROOT / "docs" / "studies.md").read_text()
+    for command in (SCHEDULER_COMMAND, WORKER_COMMAND):
+        assert command.format(port=8786) in studies, f"docs/studies.md: show `{command.format(port=8786)}`"
+
+
+def test_a_sweep_on_the_cluster_gives_the_local_pools_rows_and_ships_the_fmus_once(dask_cluster, tmp_path):
+    assert cli_main(["sweep", *SMALL, "--out", str(tmp_path / "local"), "--jobs", "2"]) == 0
+    assert cli_main(["sweep", *SMALL, "--out", str(tmp_path / "dask"), "--scheduler", dask_cluster.address]) == 0
+    local, remote = rows_of(tmp_path / "local" / "sweep.csv"), rows_of(tmp_path / "dask" / "sweep.csv")
+    assert remote == local and len(local) == 12  # scores bit for bit, every point once
+    cached = sorted((dask_cluster.temp / tasks.CACHE_FOLDER).glob("*/*.fmu"))
+    assert len(cached) == 3  # the three FMUs, once for the host, by their SHA-256
+    assert all(path.parent.name == tasks.sha256_of(path)[:20] for path in cached)
+
+
+def test_a_worker_killed_mid_sweep_loses_nothing_and_counts_nothing_twice(dask_cluster, fmu_paths, tmp_path):
+    plan = sweep.plan_sweep("pendulum_case2", ("vud",), [sweep.parse_grid(g) for g in LONG_GRIDS], stop=3, step=1e-3,
+                            fmu_paths=fmu_paths)
+    killed = []
+
+    def kill_a_worker(row, done):
+        if done == 2 and not killed:
+            dask_cluster.kill_worker(0)  # the nanny and its worker: as a host lost mid-sweep
+            killed.append(time.monotonic())
+
+    summary = sweep.run_sweep(plan, tmp_path, scheduler=dask_cluster.address, progress=False, on_row=kill_a_worker,
+                              plot=False)
+    assert killed and dask_cluster.workers[0].poll() is not None
+    assert (summary.computed, summary.lost, summary.scheduler_lost) == (12, 0, "")
+    rows = rows_of(tmp_path / "sweep.csv")
+    assert len(rows) == 12 and {cells[-2] for cells in rows.values()} <= {"ok", "diverged"}
+
+
+def test_the_scheduler_gone_mid_sweep_is_one_line_and_the_sweep_resumes(dask_cluster, tmp_path):
+    out = tmp_path / "out"
+    argv = ["pendulum_case2", "--controller", "vud", *[part for g in LONG_GRIDS for part in ("--grid", g)],
+            "--stop", "3", "--step", "1e-3", "--no-progress", "--out", str(out)]
+    command = subprocess.Popen([sys.executable, "-m", "harness", "sweep", *argv, "--scheduler", dask_cluster.address],
+                               cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and command.poll() is None:
+            path = out / "sweep.csv"
+            if path.exists() and path.read_text().count("\n") >= 3:  # header + 2 rows
+                dask_cluster.kill_scheduler()
+                break
+            time.sleep(0.05)
+        stdout, stderr = command.communicate(timeout=120)
+    finally:
+        if command.poll() is None:
+            os.killpg(command.pid, signal.SIGKILL)
+            command.wait()
+    errors = [line for line in stderr.splitlines() if "error" in line.lower()]
+    assert command.returncode == 1 and "Traceback" not in stderr, stderr
+    assert len(errors) == 1 and errors[0].startswith(f"error: lost the Dask scheduler at {dask_cluster.address} ("), stderr
+    assert "point(s) not run, the finished ones are in" in errors[0] and "run the same command to resume" in errors[0]
+    before = rows_of(out / "sweep.csv")
+    assert 2 <= len(before) < 12
+    assert cli_main(["sweep", *argv, "--jobs", "2"]) == 0  # resumed on the local pool
+    after = rows_of(out / "sweep.csv")
+    assert len(after) == 12 and all(after[key] == cells for key, cells in before.items())
+
+
+def test_a_short_tune_on_the_cluster_finishes_as_the_local_pool_does(dask_cluster, postgres, tmp_path):
+    """The trials as Dask tasks, the study in the PostgreSQL server: the local pool's finished count, no trial
+    twice, none left running; the scheduler gone mid-study is one line, and another run completes it."""
+    import optuna
+
+    base = ["tune", "pendulum_case1", "--stop", "0.3", "--trials", "10", "--quiet", "--held-out"]
+    assert cli_main([*base, "--jobs", "2", "--out", str(tmp_path / "local")]) == 0
+    url = postgres.url(postgres.create_database(f"cluster_{os.getpid()}"))
+    assert cli_main([*base, "--scheduler", dask_cluster.address, "--storage", url, "--out", str(tmp_path / "dask")]) == 0
+    local = optuna.load_study(study_name="pendulum_case1-vud-ITAE",
+                              storage=f"sqlite:///{tmp_path / 'local' / 'pendulum_case1.db'}").get_trials()
+    remote = optuna.load_study(study_name="pendulum_case1-vud-ITAE", storage=url).get_trials()
+    finished = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)
+    for trials in (local, remote):
+        assert sum(t.state in finished for t in trials) == 10
+        assert not [t for t in trials if t.state == optuna.trial.TrialState.RUNNING]
+        assert len({t.number for t in trials}) == len(trials)
+    # the scheduler gone mid-study: one line, the finished trials kept, the study completed by another run
+    long = ["tune", "pendulum_case1", "--stop", "2", "--trials", "16", "--quiet", "--held-out", "--study", "long",
+            "--storage", url, "--out", str(tmp_path / "dask")]
+    command = subprocess.Popen([sys.executable, "-m", "harness", *long, "--scheduler", dask_cluster.address],
+                               cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and command.poll() is None:
+            try:
+                trials = optuna.load_study(study_name="long", storage=url).get_trials()
+            except KeyError:
+                trials = []
+            if sum(t.state in finished for t in trials) >= 3:
+                dask_cluster.kill_scheduler()
+                break
+            time.sleep(0.2)
+        stderr = command.communicate(timeout=120)[1]
+    finally:
+        if command.poll() is None:
+            os.killpg(command.pid, signal.SIGKILL)
+            command.wait()
+    errors = [line for line in stderr.splitlines() if "error" in line.lower()]
+    assert command.returncode == 1 and len(errors) == 1 and "Traceback" not in stderr, stderr
+    assert errors[0].startswith(f"error: lost the Dask scheduler at {dask_cluster.address} (") and \
+        "run the same command to resume" in errors[0], stderr
+    assert postgres.password not in stderr
+    assert cli_main([*long, "--jobs", "2"]) == 0
+    trials = optuna.load_study(study_name="long", storage=url).get_trials()
+    assert sum(t.state in finished for t in trials) == 16
+    assert not [t for t in trials if t.state == optuna.trial.TrialState.RUNNING]
