@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from harness.cli import main as cli_main
-from harness.executors import tasks
+from harness.executors import dask_pool, tasks
 from harness.studies import sweep
 from tests.cluster_helpers import SCHEDULER_COMMAND, WORKER_COMMAND
 
@@ -73,6 +73,36 @@ def test_a_worker_killed_mid_sweep_loses_nothing_and_counts_nothing_twice(dask_c
     assert (summary.computed, summary.lost, summary.scheduler_lost) == (12, 0, "")
     rows = rows_of(tmp_path / "sweep.csv")
     assert len(rows) == 12 and {cells[-2] for cells in rows.values()} <= {"ok", "diverged"}
+
+
+def test_every_worker_lost_the_files_go_again_to_the_next_and_none_at_all_is_said(dask_cluster, fmu_paths, tmp_path,
+                                                                                   monkeypatch):
+    """Every worker killed at once takes the FMUs scattered to them along: sent again to a worker that comes,
+    the sweep finishes; with no worker coming, the run says so instead of waiting forever."""
+    monkeypatch.setattr(dask_pool, "WORKERLESS_S", 3.0)
+    monkeypatch.setattr(dask_pool, "CHECK_S", 0.5)
+    plan = sweep.plan_sweep("pendulum_case2", ("vud",), [sweep.parse_grid(g) for g in LONG_GRIDS], stop=3, step=1e-3,
+                            fmu_paths=fmu_paths)
+
+    def kill_every_worker(then_start_one: bool):
+        def on_row(row, done):
+            if done == 1:
+                for index in range(len(dask_cluster.workers)):
+                    if dask_cluster.workers[index].poll() is None:
+                        dask_cluster.kill_worker(index)
+                if then_start_one:
+                    dask_cluster.start_worker(0)
+        return on_row
+
+    summary = sweep.run_sweep(plan, tmp_path / "again", scheduler=dask_cluster.address, progress=False,
+                              on_row=kill_every_worker(True), plot=False)
+    assert (summary.computed, summary.lost, summary.scheduler_lost) == (12, 0, "")
+    assert len(rows_of(tmp_path / "again" / "sweep.csv")) == 12
+    dask_cluster.wait_for_workers(1)
+    summary = sweep.run_sweep(plan, tmp_path / "none", scheduler=dask_cluster.address, progress=False,
+                              on_row=kill_every_worker(False), plot=False)
+    assert summary.scheduler_lost.startswith(f"the Dask scheduler at {dask_cluster.address} has had no worker for 3 s")
+    assert 1 <= summary.computed < 12 and len(rows_of(tmp_path / "none" / "sweep.csv")) == summary.computed
 
 
 def test_the_scheduler_gone_mid_sweep_is_one_line_and_the_sweep_resumes(dask_cluster, tmp_path):
