@@ -100,6 +100,7 @@ class LocalPool:
         self.waiting = collections.deque()  # not handed to the pool yet
         self.suspects = collections.deque()  # held by a pool that broke: each runs again, alone
         self.running = {}  # future -> _Task
+        self.processes = {}  # pid -> the pool's worker processes (their exit codes name a lost worker's end)
         self.lost_workers = 0
         self.executor = self._start()
 
@@ -124,14 +125,24 @@ class LocalPool:
             if not self.running:
                 task = self.suspects.popleft()
                 self.running[self.executor.submit(run_task, task.function, task.item, self.files)] = task
-            return
-        while self.waiting and len(self.running) < IN_FLIGHT_PER_WORKER * self.jobs:
-            task = self.waiting.popleft()
-            self.running[self.executor.submit(run_task, task.function, task.item, self.files)] = task
+        else:
+            while self.waiting and len(self.running) < IN_FLIGHT_PER_WORKER * self.jobs:
+                task = self.waiting.popleft()
+                self.running[self.executor.submit(run_task, task.function, task.item, self.files)] = task
+        self._note_processes()
+
+    def _note_processes(self) -> None:
+        """Keep the pool's worker processes: a broken pool forgets them before their exit codes are read."""
+        self.processes.update(getattr(self.executor, "_processes", None) or {})
 
     def _exit_codes(self) -> list:
-        return [process.exitcode for process in list((getattr(self.executor, "_processes", None) or {}).values())
-                if process.exitcode not in (None, 0)]
+        codes = []
+        for process in list(self.processes.values()):
+            process.join(1.0)
+            if process.exitcode not in (None, 0):
+                codes.append(process.exitcode)
+        self.processes.clear()
+        return codes
 
     def _restart(self) -> str:
         """After a break: the old pool's remaining tasks are collected, a new pool started; returns what
@@ -143,7 +154,8 @@ class LocalPool:
         self.lost_workers += 1
         if not codes:
             return "ended abruptly"
-        code = codes[0]
+        # a broken pool terminates its other workers (SIGTERM): the dead one is the one that did not get that
+        code = next((c for c in codes if c != -signal.SIGTERM), codes[0])
         if code < 0:
             try:
                 return f"killed by {signal.Signals(-code).name}"
