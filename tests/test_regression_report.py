@@ -1,4 +1,4 @@
-"""`regress` on a user's own scenario, and its outputs (harness/studies/regression_report.py).
+"""`regress` on a user's own scenario, and its outputs (harness/studies/regression/).
 
 The plant is one the project does not ship: a first-order lag made with plain pythonfmu in the test
 (tests/data/first_order_lag_fmu.py), wired to our controller by docs/ci/lag_loop.toml in a user's
@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from harness.cli import main as cli_main
-from harness.studies import regression, regression_report
+from harness.studies import regression
 from harness.studies.regression import Case
 from tests.user_repo import make_user_repo
 
@@ -296,13 +296,13 @@ def test_a_run_more_than_twice_as_slow_as_its_reference_is_flagged(flow, mutated
                                  junit=tmp_path / "junit.xml")
     comparison = outcome.comparisons[0]
     assert comparison.passed and comparison.slowdown == pytest.approx(3.0 / 1.4)
-    assert "2.1x slower than the reference run" in regression_report.slowness(comparison)
+    assert "2.1x slower than the reference run" in regression.slowness(comparison)
     slow = junit(tmp_path / "junit.xml").find("testsuite/testcase/properties/property[@name='slow']")
     assert slow is not None and slow.get("value").startswith("2.1x slower")
     assert "2.1x slower" in (tmp_path / "report" / "report.html").read_text()
     edit_meta(folder, wall_s=1.6)  # 1.9x: not flagged
     outcome = regression.regress([case], runs=[run], reference_dir=folder, report_dir=None)
-    assert regression_report.slowness(outcome.comparisons[0]) == ""
+    assert regression.slowness(outcome.comparisons[0]) == ""
 
 
 def test_an_edited_scenario_file_is_detected_by_its_hash_and_the_change_is_named(flow, fmu_paths, tmp_path):

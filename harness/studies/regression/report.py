@@ -1,6 +1,6 @@
-"""The regression's outputs: report.md, report.html with the plots of failing signals, JUnit XML.
+"""The regression's reports: report.md, report.html with the figures of failing signals, JUnit XML.
 
-Written by ``python -m harness regress`` (harness/studies/regression.py) from its comparisons:
+Written by ``python -m harness regress`` (:mod:`.command`) from its comparisons:
 
 * ``report.md``: the summary table and every signal (pass/fail, largest excursion and where);
 * ``report.html``: a static page (no server, no script: it opens from a CI artifact) with the
@@ -10,8 +10,6 @@ Written by ``python -m harness regress`` (harness/studies/regression.py) from it
   signal, its largest excursion and its time, the report's path in the case's output, the wall
   time of the run and of the reference's run (and a flag when the run is more than
   ``SLOW_FACTOR`` times slower), as GitHub Actions, GitLab CI and Jenkins read it.
-
-This module reads the comparisons' attributes only; it imports no other study.
 """
 from __future__ import annotations
 
@@ -22,23 +20,13 @@ import re
 import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
-import numpy as np
-
-from .. import scenario as scenarios
-from ..units import variable_unit, with_unit
+from .figures import draw_failing_signals, slug
+from .references import DEFAULT_TOLERANCES, REFERENCE_DIR, relative
+from .runs import POINTS
 
 SLOW_FACTOR = 2.0  # a case whose run takes more than this times its reference's run is flagged
 SUMMARY_HEADER = ["case", "result", "signals in tube", "worst signal", "max outside tube", "at t [s]",
                   "max abs deviation", "run [s]", "reference run [s]", "notes"]
-
-
-def slug(text: str) -> str:
-    """A file and anchor name from a case label and a signal (letters, digits, '.', '_', '-')."""
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_")
-
-
-def plot_name(comparison, signal) -> str:
-    return f"{slug(comparison.case.label)}_{signal.signal}.png"
 
 
 def _format_tolerances(tolerances: dict) -> str:
@@ -51,72 +39,8 @@ def slowness(comparison) -> str:
     return f"{ratio:.1f}x slower than the reference run" if ratio is not None and ratio > SLOW_FACTOR else ""
 
 
-# ------------------------------------------------------------------ plots
-def plot_signal(path: Path, case, comparison, reference, run):
-    """Reference, tube and new result over the whole horizon, a zoom around the worst point, and the
-    excursion outside the tube; the largest excursion is marked on all three."""
-    import matplotlib  # here, not at module level: a heavy import, paid only when a failing signal is drawn
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    name = comparison.signal
-    unit = variable_unit(scenarios.load(case.scenario), name)
-    funnel = comparison.funnel or {}
-    figure, (whole, zoom, excursion) = plt.subplots(3, 1, figsize=(9, 8), gridspec_kw={"height_ratios": [3, 3, 1.3]})
-    worst = comparison.t_max_error
-    for axis in (whole, zoom):
-        if "lowerBound" in funnel:
-            lower, upper = funnel["lowerBound"], funnel["upperBound"]
-            grid = np.union1d(lower[:, 0], upper[:, 0])
-            axis.fill_between(grid, np.interp(grid, lower[:, 0], lower[:, 1]), np.interp(grid, upper[:, 0], upper[:, 1]),
-                              color="tab:gray", alpha=0.35, lw=0, label="tube")
-        axis.plot(reference.time, reference.signals[name], color="k", lw=0.9, label="reference")
-        axis.plot(run.time, run.signals[name], color="tab:red", lw=0.9, label="new result")
-        if worst is not None and np.isfinite(worst):
-            value = float(np.interp(worst, run.time, run.signals[name]))
-            if np.isfinite(value):
-                axis.plot([worst], [value], "o", ms=9, mfc="none", mec="tab:blue", mew=1.5,
-                          label=f"largest excursion (t = {worst:.4g} s)")
-        axis.set_ylabel(with_unit(name, unit))
-    centre = worst if worst is not None else float(reference.time[-1]) / 2
-    half = 0.02 * float(reference.time[-1] - reference.time[0]) + 1e-9
-    inside = (reference.time >= centre - half) & (reference.time <= centre + half)
-    if inside.any():
-        values = np.concatenate([reference.signals[name][inside], run.signals[name][inside]])
-        values = values[np.isfinite(values)]
-        if values.size:
-            margin = 0.2 * (values.max() - values.min()) + 1e-12
-            zoom.set_ylim(values.min() - margin, values.max() + margin)
-    zoom.set_xlim(centre - half, centre + half)
-    zoom.set_title(f"zoom around t = {centre:.4g} s", fontsize=8)
-    whole.set_title(f"{case.label}: {name} ({comparison.message or 'inside the tube'})", fontsize=9)
-    whole.legend(fontsize=8, loc="best")
-    if "errors" in funnel:
-        excursion.plot(funnel["errors"][:, 0], funnel["errors"][:, 1], color="tab:red", lw=0.8)
-        if worst is not None:
-            excursion.axvline(worst, color="tab:blue", lw=0.8, ls="--")
-    excursion.set_ylabel(with_unit("outside tube", unit))
-    excursion.set_xlabel("time (s)")
-    figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
-
-
-def draw_failing_signals(comparisons, runs, references, directory: Path):
-    """A PNG for every failing signal that has a reference (old PNGs removed); sets ``signal.plot``."""
-    for old in directory.glob("*.png"):
-        old.unlink()
-    for comparison, run, reference in zip(comparisons, runs, references):
-        for signal in comparison.signals:
-            if not signal.passed and reference is not None and signal.signal in reference.signals:
-                path = directory / plot_name(comparison, signal)
-                plot_signal(path, comparison.case, signal, reference, run)
-                signal.plot = path
-
-
 # --------------------------------------------------------------- markdown
-def _table(rows, header) -> list[str]:
+def markdown_table(rows, header) -> list[str]:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
     return lines
@@ -161,7 +85,7 @@ def write_markdown(comparisons, path: Path, reference_dir, tolerances: dict, poi
     title, generated, tolerance = _header_lines(comparisons, reference_dir, tolerances, points)
     lines = [f"# {title}", "", generated, "", tolerance, "", "Also as a web page: [report.html](report.html).", "",
              "## Summary", ""]
-    lines += _table(summary_rows(comparisons), SUMMARY_HEADER)
+    lines += markdown_table(summary_rows(comparisons), SUMMARY_HEADER)
     lines += ["", "## Signals", ""]
     rows = []
     for comparison in comparisons:
@@ -171,7 +95,7 @@ def write_markdown(comparisons, path: Path, reference_dir, tolerances: dict, poi
                          f"{s.t_max_error:.4g}" if s.t_max_error is not None else "-", f"{s.max_deviation:.3g}",
                          f"{s.t_max_deviation:.4g}" if s.t_max_deviation is not None else "-",
                          _own_tolerances(comparison, s), s.message, plot])
-    lines += _table(rows, ["case", "signal", "result", "max outside tube", "at t [s]", "max abs deviation",
+    lines += markdown_table(rows, ["case", "signal", "result", "max outside tube", "at t [s]", "max abs deviation",
                            "at t [s]", "own tolerances", "message", "plot"])
     path.write_text("\n".join(lines) + "\n")
     return path
@@ -342,3 +266,16 @@ def write_junit(comparisons, path: Path, report: Path | None, suite: str = "afc-
     path.parent.mkdir(parents=True, exist_ok=True)
     ElementTree.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
     return path
+
+
+# ----------------------------------------------------------- both reports
+def write_report(comparisons, runs, references, directory: Path, tolerances: dict,
+                 reference_dir: Path = REFERENCE_DIR) -> Path:
+    """report.md and report.html (with a PNG of every failing signal) in ``directory``; returns report.md."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    draw_failing_signals(comparisons, runs, references, directory)
+    shown = relative(reference_dir) + "/"
+    tolerances = {**DEFAULT_TOLERANCES, **(tolerances or {})}
+    write_html(comparisons, directory / "report.html", shown, tolerances, POINTS)
+    return write_markdown(comparisons, directory / "report.md", shown, tolerances, POINTS)
