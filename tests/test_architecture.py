@@ -42,7 +42,8 @@ TOOLCHAIN = f"{BUILD}.toolchain"
 CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harness.scenario", "harness.variants",
         "harness.fmi", "harness.scenario_checks", "harness.master", "harness.compiled_loop", "harness.loop_interface",
         "harness.master_loop", "harness.scores", "harness.cases", "harness.units", "harness.me_master",
-        "harness.me_loop", "harness.cvode", "harness.scenario_toml", "harness.progress", "harness.termination"}
+        "harness.me_loop", "harness.cvode", "harness.scenario_toml", "harness.progress", "harness.termination",
+        "harness.unpack", "harness.atomic_files"}
 COMPOSITION_ROOT = "harness.cli"
 STUDIES, HOSTS = "harness.studies", "harness.hosts"
 #: what the master's compiled loop may never reach, directly or through other modules

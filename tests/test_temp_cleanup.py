@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from harness import fmi
+from harness import fmi, unpack
 from harness import scenario as scenarios
 from harness.cases import Case, run_case
 from harness.fmi import Component, FmiError, ModelInfo
@@ -92,11 +92,11 @@ def test_fmus_extracted_once_per_process_are_shared_renewed_and_removed(fmu_path
     """harness/fmi.py's extracted_fmu: one folder per FMU file and process, a new one when the file
     changes, none left after release_extractions; the first call removes what a killed process left."""
     ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    killed = temp_dir / f"{fmi.EXTRACTION_PREFIX}{int(ended.stdout)}-TrackingReference-x"
-    running = temp_dir / f"{fmi.EXTRACTION_PREFIX}{os.getppid()}-TrackingReference-y"
+    killed = temp_dir / f"{unpack.PREFIX}{int(ended.stdout)}-shared-TrackingReference-x"
+    running = temp_dir / f"{unpack.PREFIX}{os.getppid()}-shared-TrackingReference-y"
     for folder in (killed, running):
         folder.mkdir()
-    monkeypatch.setattr(fmi, "_RELEASE_AT_EXIT", [])  # as in a new process: its first call sweeps
+    monkeypatch.setattr(unpack, "_AT_EXIT", [])  # as in a new process: its first unpack folder sweeps
     path = Path(shutil.copy(fmu_paths["TrackingReference"], tmp_path / "TrackingReference.fmu"))
     info, folder = fmi.extracted_fmu(path)
     assert not killed.exists() and running.exists()

@@ -24,13 +24,12 @@ from __future__ import annotations
 import json
 import re
 import shutil
-import tempfile
-import zipfile
 from pathlib import Path
 
 import numpy as np
 from fmpy import simulate_fmu
 
+from .. import unpack
 from ..fmi import ModelInfo
 from ..master import Master, resolve_fmu
 from ..me_master import ModelExchangeMaster
@@ -142,16 +141,15 @@ def run_libcosim_ssp(scenario, fmu_paths, package: Path) -> tuple:
     _, infos = _infos(scenario, fmu_paths)
     with captured_console() as lines:
         _libcosim_logging()
-        folder = Path(tempfile.mkdtemp(prefix="afc_libcosim_"))
+        folder = unpack.unpack_folder("libcosim")
         try:
-            with zipfile.ZipFile(package) as archive:
-                archive.extractall(folder)
+            unpack.extract_archive(package, folder)
             execution = CosimExecution.from_ssp_file(str(folder))
             indices = {name: execution.slave_index_from_instance_name(name) for name in scenario.components}
             trajectory = _libcosim_trajectory(execution, indices, infos, scenario)
             del execution
         finally:
-            shutil.rmtree(folder, ignore_errors=True)
+            unpack.remove_folder(folder)
     return trajectory, console_warnings(lines), "console (libcosim log level warning)"
 
 
@@ -202,7 +200,7 @@ def run_container(scenario, fmu_paths, package=None, mode: str = "parallel") -> 
     paths, infos = _infos(scenario, fmu_paths)
     fmu_files = {name: f"{infos[name].model_identifier}.fmu" for name in scenario.components}
     order = tuple(reversed(COMPONENT_ORDER)) if mode == "seq-reverse" else COMPONENT_ORDER
-    folder = Path(tempfile.mkdtemp(prefix="afc_container_"))
+    folder = unpack.unpack_folder("container")
     messages = []
     try:
         for name in scenario.components:
@@ -223,7 +221,7 @@ def run_container(scenario, fmu_paths, package=None, mode: str = "parallel") -> 
                               step_size=scenario.step, output_interval=scenario.step, output=names, logger=logger,
                               debug_logging=True)
     finally:
-        shutil.rmtree(folder, ignore_errors=True)
+        unpack.remove_folder(folder)
     time = np.asarray(result["time"], dtype=float)
     columns = [np.asarray(result[n], dtype=float) for n in names]
     # the container forwards the embedded FMUs' messages as "<FMU file>: ..."; its own banners (status Warning:

@@ -26,11 +26,11 @@ import contextlib
 import csv
 import ctypes
 import importlib.util
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from .. import unpack
 
 MODULE = "OMSimulator"
 
@@ -46,14 +46,8 @@ def unavailable() -> str | None:
 @contextlib.contextmanager
 def private_temp_dir():
     """A temporary folder that OMSimulator's folders also go into (``tempfile.tempdir``), removed afterwards."""
-    folder = tempfile.mkdtemp(prefix="afc_oms_")
-    previous = tempfile.tempdir
-    tempfile.tempdir = folder
-    try:
+    with unpack.private_temporary_folder("oms") as folder:
         yield Path(folder)
-    finally:
-        tempfile.tempdir = previous
-        shutil.rmtree(folder, ignore_errors=True)
 
 
 def read_result(path: Path, names: list) -> tuple:
