@@ -54,7 +54,8 @@ from harness.fmu_build.native_stages import LAYER, ROOT, ls_ref
 from harness.fmu_build.native_stages.compiler import compile_binary
 from harness.fmu_build.native_stages.description import fmi2_description, fmi3_description, model_guid, pretty_xml
 from harness.fmu_build.native_stages.header import variables_header
-from harness.fmu_build.native_stages.package import atomic_write, fmu_files, zip_archive
+from harness.atomic_files import write_bytes as atomic_write
+from harness.fmu_build.native_stages.package import fmu_files, zip_archive
 from harness.fmu_build.native_stages.sources import add_source_files, source_files
 from harness.fmu_build.native_stages.targets import PLATFORMS, selected_targets
 from plants import registry as plant_registry

@@ -75,7 +75,7 @@ from harness.fmu_build import builder as build_fmu
 
 from .. import cli_args, variants
 from .. import scenario as scenarios
-from .. import unpack
+from .. import atomic_files, unpack
 from ..cases import parallel_map
 from ..master import simulate
 from ..scores import control_energy, iae, itae, score
@@ -109,10 +109,10 @@ class EngineResult:
 
     def write_csv(self, path) -> Path:
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         header = ",".join(f'"{name}"' for name in ["time", *self.columns])
-        np.savetxt(path, np.column_stack([self.time, self.values]), delimiter=",", header=header, comments="",
-                   fmt="%.17g")
+        with atomic_files.replacing(path, "w", newline="") as stream:
+            np.savetxt(stream, np.column_stack([self.time, self.values]), delimiter=",", header=header, comments="",
+                       fmt="%.17g")
         return path
 
 

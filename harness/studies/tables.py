@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import cli_args, variants
+from .. import atomic_files, cli_args, variants
 from .. import scenario as scenarios
 from ..cases import Case, default_jobs, run_cases
 from ..me_master import ALGORITHM as MODEL_EXCHANGE
@@ -46,7 +46,7 @@ BEYOND_PAPER_SETS = (2, 3)  # fuzzy sets per input: M = 8 and 27 rules at order 
 
 # ------------------------------------------------------------------ tables
 def write_table(path: Path, rows: list, columns=TABLE_COLUMNS):
-    with open(path, "w", newline="") as stream:
+    with atomic_files.replacing(path, "w", newline="") as stream:
         writer = csv.DictWriter(stream, fieldnames=columns, extrasaction="ignore")
         writer.writeheader()
         for row in rows:
@@ -161,7 +161,7 @@ def figures(rows: list, out: Path) -> list:
             continue
         fig = draw_figure(name, runs, plt)
         path = out / f"{name}.png"
-        fig.savefig(path, dpi=90)
+        atomic_files.save_figure(fig, path, dpi=90)
         plt.close(fig)
         paths.append(path)
     return paths
@@ -461,7 +461,7 @@ def tables_command(args) -> int:
     write_table(out / "table3_beyond_paper.csv", beyond_rows,
                 ("scenario", "controller", "sets", *TABLE_COLUMNS[2:-2], "status"))
     figure_paths = figures(rows, out)
-    (out / "report.md").write_text(report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib,
+    atomic_files.write_text(out / "report.md", report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib,
                                                    beyond_rows, rtol))
     print(run_summary(len(cases), len(everything), len(extra), len(refined), ladder_s, wall_s, jobs, peak_mib,
                       None if me else communication_steps([*(o for ladder in ladders.values() for o in ladder),
@@ -491,7 +491,7 @@ def tables_command(args) -> int:
                   "(no --stop, no failed run)", file=sys.stderr)
             return 1
         target = DOCS_DIR / README_FIGURE
-        shutil.copyfile(out / README_FIGURE, target)
+        atomic_files.write_bytes(target, (out / README_FIGURE).read_bytes())
         print(f"applied: {target} (the README's figure) from {out / README_FIGURE}")
     return 1 if failed else 0
 

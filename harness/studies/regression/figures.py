@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ... import atomic_files
 from ... import scenario as scenarios
 from ...units import variable_unit, with_unit
 
@@ -70,17 +71,21 @@ def plot_signal(path: Path, case, comparison, reference, run):
     excursion.set_ylabel(with_unit("outside tube", unit))
     excursion.set_xlabel("time (s)")
     figure.tight_layout()
-    figure.savefig(path, dpi=110)
+    atomic_files.save_figure(figure, path, dpi=110)
     plt.close(figure)
 
 
 def draw_failing_signals(comparisons, runs, references, directory: Path):
-    """A PNG for every failing signal that has a reference (old PNGs removed); sets ``signal.plot``."""
-    for old in directory.glob("*.png"):
-        old.unlink()
+    """A PNG for every failing signal that has a reference, each replacing its old one whole; sets
+    ``signal.plot``.  The PNGs of an earlier report that this one has not drawn are removed afterwards."""
+    drawn = set()
     for comparison, run, reference in zip(comparisons, runs, references):
         for signal in comparison.signals:
             if not signal.passed and reference is not None and signal.signal in reference.signals:
                 path = directory / plot_name(comparison, signal)
                 plot_signal(path, comparison.case, signal, reference, run)
                 signal.plot = path
+                drawn.add(path.name)
+    for old in directory.glob("*.png"):
+        if old.name not in drawn:
+            old.unlink()

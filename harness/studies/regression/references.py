@@ -20,6 +20,7 @@ from __future__ import annotations
 import datetime
 import hashlib
 import importlib.metadata
+import io
 import json
 import math
 import platform
@@ -34,7 +35,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from ... import cli_args
+from ... import atomic_files, cli_args
 from ... import scenario as scenarios
 from ...cases import Case
 from ...me_master import DEFAULT_RTOL
@@ -139,11 +140,11 @@ def write_reference(run: CaseRun, directory: Path = REFERENCE_DIR, tolerances: d
         raise RuntimeError(f"{run.case.label}: a run with parameter overrides never becomes a reference")
     directory = Path(directory)
     csv_path, json_path = reference_paths(run.case, directory)
-    directory.mkdir(parents=True, exist_ok=True)
     names = list(run.signals)
     header = ",".join(f'"{name}"' for name in ["time", *names])
     table = np.column_stack([run.time, *[run.signals[name] for name in names]])
-    np.savetxt(csv_path, table, delimiter=",", header=header, comments="", fmt=VALUE_FORMAT)
+    csv_text = io.StringIO()
+    np.savetxt(csv_text, table, delimiter=",", header=header, comments="", fmt=VALUE_FORMAT)
     previous = previous or {}
     digest, settings = scenario_fingerprint(run.case)
     scenario_path = scenarios.load(run.case.scenario).path
@@ -162,7 +163,8 @@ def write_reference(run: CaseRun, directory: Path = REFERENCE_DIR, tolerances: d
         "git_commit": git_commit(), "wall_s": round(run.wall_s, 3),
         "scenario_settings": settings,
     }
-    json_path.write_text(json.dumps(meta, indent=2) + "\n")
+    # the pair replaces the old one only once both are written (harness/atomic_files.py)
+    atomic_files.write_files({csv_path: csv_text.getvalue(), json_path: json.dumps(meta, indent=2) + "\n"})
     return csv_path, json_path
 
 

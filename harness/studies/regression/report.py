@@ -20,6 +20,7 @@ import re
 import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
+from ... import atomic_files
 from .figures import draw_failing_signals, slug
 from .references import DEFAULT_TOLERANCES, REFERENCE_DIR, relative
 from .runs import POINTS
@@ -97,7 +98,7 @@ def write_markdown(comparisons, path: Path, reference_dir, tolerances: dict, poi
                          _own_tolerances(comparison, s), s.message, plot])
     lines += markdown_table(rows, ["case", "signal", "result", "max outside tube", "at t [s]", "max abs deviation",
                            "at t [s]", "own tolerances", "message", "plot"])
-    path.write_text("\n".join(lines) + "\n")
+    atomic_files.write_text(path, "\n".join(lines) + "\n")
     return path
 
 
@@ -201,7 +202,7 @@ def write_html(comparisons, path: Path, reference_dir, tolerances: dict, points:
              _cell(_own_tolerances(c, s))] for c, s in passing]
     lines += _html_table(["case", "signal", "max abs deviation", "at t [s]", "own tolerances"], rows)
     lines += ["</body>", "</html>"]
-    path.write_text("\n".join(lines) + "\n")
+    atomic_files.write_text(path, "\n".join(lines) + "\n")
     return path
 
 
@@ -263,8 +264,8 @@ def write_junit(comparisons, path: Path, report: Path | None, suite: str = "afc-
         ElementTree.SubElement(testcase, "system-out").text = "\n".join(output)
     ElementTree.indent(root)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    ElementTree.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+    with atomic_files.replacing(path, "wb") as stream:
+        ElementTree.ElementTree(root).write(stream, encoding="utf-8", xml_declaration=True)
     return path
 
 
