@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import os
+import shlex
 import sys
 import time as clock
 from dataclasses import dataclass
@@ -106,7 +107,7 @@ def regress_command(args) -> int:
         print(f"wrote {len(outcome.written)} reference files ({size / 1e6:.2f} MB) to "
               f"{relative(reference_dir)}/ in {wall:.0f} s; report {outcome.html}")
         return 0
-    for line in markdown_table(summary_rows(outcome.comparisons), SUMMARY_HEADER):
+    for line in markdown_table(summary_rows(outcome.comparisons), SUMMARY_HEADER, escape=False):
         print(line)
     for comparison in outcome.comparisons:
         if slowness(comparison):
@@ -117,10 +118,10 @@ def regress_command(args) -> int:
     if outcome.junit:
         print(f"JUnit XML: {outcome.junit}")
     if any("no reference" in c.message for c in outcome.comparisons):
-        where = f" --references {args.references}" if args.references else ""
-        me = "--algorithm me --edition native " if args.algorithm == "me" else ""
-        print(f"missing references: create them with `python -m harness regress {' '.join(args.scenarios or [])}"
-              f"{' ' if args.scenarios else ''}{me}--update{where}`", file=sys.stderr)
+        words = ["python", "-m", "harness", "regress", *map(str, args.scenarios or []),
+                 *(["--algorithm", "me", "--edition", "native"] if args.algorithm == "me" else []), "--update",
+                 *(["--references", str(args.references)] if args.references else [])]
+        print(f"missing references: create them with `{shlex.join(words)}`", file=sys.stderr)
     return 0 if outcome.passed else 1
 
 

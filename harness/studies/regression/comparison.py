@@ -11,6 +11,8 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import re
+import shlex
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -99,11 +101,20 @@ class CaseComparison:
         return self.wall_s / self.reference_wall_s if self.reference_wall_s else None
 
 
+def code_span(text: str) -> str:
+    """``text`` as one Markdown code span, whatever backticks it holds (a longer fence: CommonMark's rule)."""
+    fence = "`" * (max((len(run) for run in re.findall(r"`+", text)), default=0) + 1)
+    pad = " " if text.startswith("`") or text.endswith("`") else ""
+    return f"{fence}{pad}{text}{pad}{fence}"
+
+
 def update_command(case: Case, reference_dir: Path) -> str:
+    """The command that creates the case's reference, each argument quoted for a POSIX shell."""
     me = " --algorithm me --edition native" if case.algorithm == "me" else ""
-    command = f"python -m harness regress {case.scenario} --controller {case.controller}{me} --update"
+    command = (f"python -m harness regress {shlex.quote(str(case.scenario))} --controller {case.controller}{me} "
+               "--update")
     if Path(reference_dir).resolve() != reference_directory(case.algorithm).resolve():
-        command += f" --references {reference_dir}"
+        command += f" --references {shlex.quote(str(reference_dir))}"
     return command
 
 
@@ -117,8 +128,9 @@ def compare_case(run: CaseRun, reference: Reference | None, tolerances: dict | N
     run_tolerances = {**DEFAULT_TOLERANCES, **given}
     if reference is None:
         missing = reference_paths(case, reference_dir)[0]
-        return CaseComparison(case, [], f"no reference {relative(missing)}: run `{update_command(case, reference_dir)}` "
-                                        "to create it", run.wall_s, run_tolerances=run_tolerances)
+        return CaseComparison(case, [], f"no reference {relative(missing)}: run "
+                                        f"{code_span(update_command(case, reference_dir))} to create it", run.wall_s,
+                              run_tolerances=run_tolerances)
     messages, notes = [], []
     meta = reference.meta
     for key, value in (("start", run.start), ("stop", run.stop), ("step", run.step)):

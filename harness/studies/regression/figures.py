@@ -21,7 +21,7 @@ def slug(text: str) -> str:
 
 
 def plot_name(comparison, signal) -> str:
-    return f"{slug(comparison.case.label)}_{signal.signal}.png"
+    return f"{slug(comparison.case.label)}_{slug(signal.signal)}.png"
 
 
 def plot_signal(path: Path, case, comparison, reference, run):

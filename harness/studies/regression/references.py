@@ -60,6 +60,11 @@ def reference_directory(algorithm: str) -> Path:
 
 
 def reference_paths(case: Case, directory: Path = REFERENCE_DIR) -> tuple[Path, Path]:
+    """The case's reference files in ``directory``; a scenario name that would put them elsewhere is refused."""
+    if any(mark in case.name for mark in ("/", "\\", "\0")) or case.name.startswith("."):
+        raise cli_args.UsageError(f"scenario name {case.scenario_name!r} cannot name a reference file in "
+                                  f"{directory} (it holds '/' or '\\' or begins with '.'); give the scenario a "
+                                  "plain name")
     directory = Path(directory)
     return directory / f"{case.name}_ref.csv", directory / f"{case.name}_ref.json"
 

@@ -21,6 +21,7 @@ import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
 from ... import atomic_files
+from .comparison import code_span
 from .figures import draw_failing_signals, slug
 from .references import DEFAULT_TOLERANCES, REFERENCE_DIR, relative
 from .runs import POINTS
@@ -41,9 +42,36 @@ def slowness(comparison) -> str:
 
 
 # --------------------------------------------------------------- markdown
-def markdown_table(rows, header) -> list[str]:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+class Markdown(str):
+    """Text that is Markdown already (``**FAIL**``, an image): written as it is."""
+
+
+#: a code span of CommonMark: a run of backticks, the text, the same run (``a`b`` holds a backtick)
+CODE_SPAN = re.compile(r"(?<!`)(`+)(?!`)(.+?)(?<!`)\1(?!`)")
+#: Markdown's punctuation that could make a name a link, an image, emphasis or a table cell's end
+_MARKDOWN_PUNCTUATION = re.compile(r"([\\`*\[\]|~])")
+
+
+def markdown_text(text) -> str:
+    """Text for Markdown (a table cell): raw HTML and Markdown syntax in file, instance and signal names show
+    as written (``<`` ``>`` ``&`` as entities, the punctuation backslash-escaped, ``|`` too); the text's own
+    code spans stay code spans."""
+    if isinstance(text, Markdown):
+        return str(text)
+    text, parts, last = str(text), [], 0
+    for span in CODE_SPAN.finditer(text):
+        parts.append(_MARKDOWN_PUNCTUATION.sub(r"\\\1", html.escape(text[last:span.start()], quote=False)))
+        parts.append(span.group(0).replace("|", "\\|"))
+        last = span.end()
+    parts.append(_MARKDOWN_PUNCTUATION.sub(r"\\\1", html.escape(text[last:], quote=False)))
+    return "".join(parts)
+
+
+def markdown_table(rows, header, escape: bool = True) -> list[str]:
+    """A Markdown table; ``escape=False``: the cells as they are (the summary printed on a terminal)."""
+    shown = markdown_text if escape else str
+    lines = ["| " + " | ".join(shown(cell) for cell in header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(shown(cell) for cell in row) + " |" for row in rows]
     return lines
 
 
@@ -57,7 +85,7 @@ def summary_rows(comparisons) -> list:
         failed = [s for s in comparison.signals if not s.passed]
         worst = worst_signal(comparison)
         notes = [comparison.message or ", ".join(s.signal for s in failed), slowness(comparison), *comparison.notes]
-        rows.append([comparison.case.label, "pass" if comparison.passed else "**FAIL**",
+        rows.append([comparison.case.label, "pass" if comparison.passed else Markdown("**FAIL**"),
                      f"{len(comparison.signals) - len(failed)}/{len(comparison.signals)}",
                      worst.signal if worst else "-",
                      f"{worst.max_error:.3g}" if worst else "-",
@@ -74,7 +102,7 @@ def _header_lines(comparisons, reference_dir, tolerances: dict, points: int) -> 
     title = f"Regression report ({passed}/{len(comparisons)} cases pass)"
     generated = (f"Generated {datetime.datetime.now().replace(microsecond=0).isoformat()} by "
                  f"`python -m harness regress` on {platform.node() or 'this machine'}; references in "
-                 f"`{reference_dir}`.")
+                 f"{code_span(str(reference_dir))}.")
     tolerance = (f"Tolerances (pyfunnel): {_format_tolerances(tolerances)}, unless a reference's metadata sets its "
                  f"own (per case or per signal: listed with the signal); signals resampled to {points} points "
                  f"over each scenario's horizon. A run more than {SLOW_FACTOR:g}x slower than its reference's "
@@ -84,15 +112,16 @@ def _header_lines(comparisons, reference_dir, tolerances: dict, points: int) -> 
 
 def write_markdown(comparisons, path: Path, reference_dir, tolerances: dict, points: int) -> Path:
     title, generated, tolerance = _header_lines(comparisons, reference_dir, tolerances, points)
-    lines = [f"# {title}", "", generated, "", tolerance, "", "Also as a web page: [report.html](report.html).", "",
-             "## Summary", ""]
+    lines = [f"# {title}", "", markdown_text(generated), "", markdown_text(tolerance), "",
+             "Also as a web page: [report.html](report.html).", "", "## Summary", ""]
     lines += markdown_table(summary_rows(comparisons), SUMMARY_HEADER)
     lines += ["", "## Signals", ""]
     rows = []
     for comparison in comparisons:
         for s in comparison.signals:
-            plot = f"![]({s.plot.name})" if s.plot else ""
-            rows.append([comparison.case.label, s.signal, "pass" if s.passed else "**FAIL**", f"{s.max_error:.3g}",
+            plot = Markdown(f"![]({s.plot.name})") if s.plot else ""
+            rows.append([comparison.case.label, s.signal, "pass" if s.passed else Markdown("**FAIL**"),
+                         f"{s.max_error:.3g}",
                          f"{s.t_max_error:.4g}" if s.t_max_error is not None else "-", f"{s.max_deviation:.3g}",
                          f"{s.t_max_deviation:.4g}" if s.t_max_deviation is not None else "-",
                          _own_tolerances(comparison, s), s.message, plot])
@@ -125,7 +154,8 @@ figcaption { font-size: 0.85em; color: #555; }
 
 def _inline(text: str) -> str:
     """Escaped text with `code` spans as <code>."""
-    return re.sub(r"`([^`]+)`", r"<code>\1</code>", html.escape(text))
+    return CODE_SPAN.sub(lambda span: f"<code>{span.group(2).strip() if span.group(1) != '`' else span.group(2)}"
+                                      "</code>", html.escape(text))
 
 
 def _cell(text, css: str = "") -> str:
