@@ -152,6 +152,7 @@ SLOW = {
         "test_two_builds_at_once_leave_one_whole_fmu",),
     "test_omsimulator.py": ("test_its_c_api_takes_the_step_from_the_package_and_matches_our_master",
         "test_its_matrix_rows_are_within_1_percent_without_warnings", "test_its_python_api_reads_no_step_annotation",
+        "test_nothing_is_printed_after_a_process_that_ran_it_ends",
         "test_its_strongly_coupled_mode_is_first_order_in_its_maximum_step",),
     "test_plants.py": ("test_bad_parameter_fails_with_a_message_naming_it_and_its_range",
         "test_friction_opposes_motion_and_payload_follows_mr0_plus_mr1_sin_t",

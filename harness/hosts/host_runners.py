@@ -81,8 +81,10 @@ def run_omsimulator(scenario, fmu_paths, package: Path, api: str = "python") -> 
             time, columns = omsimulator.run_python_api(package, scenario.stop, names, output_step=scenario.step)
         else:
             time, columns = omsimulator.run_python_api(package, scenario.stop, names, fixed_step=scenario.step)
-    # its own complaint that it lacks the SSP schema files of its install is not an FMU's warning
-    warnings = [w for w in console_warnings(lines) if "could not load the ssd schema file" not in w]
+    # its own complaint that it lacks the SSP schema files of its install, and its count of what it logged
+    # ("info:    2 warnings"), are not an FMU's warnings
+    warnings = [w for w in console_warnings(lines) if "could not load the ssd schema file" not in w
+                and not re.fullmatch(r"info:\s+\d+ warnings", w)]
     return Trajectory(time, *(columns[n] for n in names)), warnings, "console (OMSimulator prints the FMUs' messages)"
 
 
