@@ -257,20 +257,63 @@ _TEMP_BEFORE = set()
 
 def pytest_sessionstart(session):
     _TEMP_BEFORE.update(os.listdir(tempfile.gettempdir()))
-    if session.config.getoption("numprocesses", None) and not hasattr(session.config, "workerinput"):
-        _build_before_the_workers_start()
+    if hasattr(session.config, "workerinput"):  # a pytest-xdist worker: the controller said it all
+        return
+    if session.config.getoption("numprocesses", None):
+        _build_before_the_workers_start(_say(session.config))
+    else:
+        _announce_stale_fmus(_say(session.config))
 
 
-def _build_before_the_workers_start():
-    """Under pytest-xdist (-n), the controller builds what is stale once, before its workers start:
-    otherwise each worker would build the same FMUs at once (safe, as every build replaces its file whole,
-    but twice the work)."""
+def _say(config):
+    """One line on the terminal now, before the first test (pytest captures print)."""
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    return reporter.write_line if reporter is not None else (lambda text: print(text, file=sys.stderr, flush=True))
+
+
+def _stale() -> tuple:
+    """(stale pythonfmu FMUs, stale native models or None without zig's compiler)."""
     from harness.fmu_build import builder as build_fmu
     from harness.fmu_build import native as build_native
 
+    python = [fmu.model_identifier for fmu in build_fmu.FMUS if build_fmu.is_stale(fmu)]
+    native = build_native.stale_models() if build_native.compiler_available() else None
+    return python, native
+
+
+def _announce_stale_fmus(say):
+    """A serial session builds an FMU when a test first needs it: say which are stale, so the wait is explained."""
+    python, native = _stale()
+    if python:
+        say(f"FMUs to build (pythonfmu, seconds each) when a test first needs them: {', '.join(python)}")
+    if native:
+        say(f"native FMUs to build (FMI 2.0 and 3.0 for every target, minutes on a cold zig cache) when a test "
+            f"first needs them: {', '.join(model.model_identifier for model in native)}")
+
+
+def _build_before_the_workers_start(say):
+    """Under pytest-xdist (-n), the controller builds what is stale once, before its workers start:
+    otherwise each worker would build the same FMUs at once (safe, as every build replaces its file whole,
+    but twice the work).  It says what it builds, one line per FMU, before it builds it."""
+    import time as clock
+
+    from harness.fmu_build import builder as build_fmu
+    from harness.fmu_build import native as build_native
+
+    python, native = _stale()
+    began = clock.perf_counter()
+    if python:
+        say(f"building the pythonfmu FMUs before the tests: {', '.join(python)}")
     build_fmu.ensure_built()
-    if build_native.compiler_available():
-        build_native.ensure_built()
+    if native:
+        say(f"building {len(native)} native FMUs before the tests (a few minutes on a cold zig cache):")
+
+        def announce(model, targets):
+            say(f"  {model.model_identifier}: FMI 2.0 and 3.0 for {', '.join(targets)} ({2 * len(targets)} binaries)")
+
+        build_native.ensure_built(announce=announce)
+    if python or native:
+        say(f"FMUs built in {clock.perf_counter() - began:.0f} s")
 
 
 def pytest_sessionfinish(session):
