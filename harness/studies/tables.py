@@ -123,6 +123,18 @@ def table_block(rows: list, scenario: str) -> list:
                                                                          if table_notes(own) else []), ""]
 
 
+def table_cases(stop=None, algorithm: str = "feedthrough", rtol: float | None = None) -> list:
+    """The cases of Tables I and II: every scenario of the paper with every controller."""
+    return [Case(name, controller, stop=stop, figure_interval=0.01, algorithm=algorithm, rtol=rtol)
+            for name in ALL_SCENARIOS for controller in CONTROLLERS]
+
+
+def pool_counts() -> tuple:
+    """(cases of Tables I/II, runs in the first pool, of them the third-order plant's): what ``--help`` says."""
+    cases, extra = table_cases(), beyond_paper_cases()
+    return len(cases), 2 * len(cases) + len(extra), len(extra)
+
+
 def beyond_paper_cases(stop=None, algorithm: str = "feedthrough", rtol: float | None = None) -> list:
     """The extra runs: the third-order plant with every controller at m = 2 and 3 sets per input."""
     return [Case(BEYOND_PAPER, controller, stop=stop, overrides=(("controller.sets", sets),), algorithm=algorithm,
@@ -427,8 +439,7 @@ def tables_command(args) -> int:
     if not me and args.rtol is not None:
         raise cli_args.UsageError("--rtol is the tolerance of --algorithm me; co-simulation has a step")
     rtol = (args.rtol or DEFAULT_RTOL) if me else None
-    cases = [Case(name, controller, stop=args.stop, figure_interval=0.01, algorithm=args.algorithm, rtol=rtol)
-             for name in ALL_SCENARIOS for controller in CONTROLLERS]
+    cases = table_cases(args.stop, args.algorithm, rtol)
     # every case at h (the tables) and at h/2 (the claims' error estimates) in one pool,
     # the longest runs first, so both cores finish together
     extra = beyond_paper_cases(args.stop, args.algorithm, rtol)  # the third-order plant, beyond the paper (no claims)
@@ -497,8 +508,11 @@ def tables_command(args) -> int:
 
 
 def register(commands):
-    tables = commands.add_parser("tables", help="run Table I/II (12 co-simulations) and the third-order "
-                                                "plant beyond the paper (6) and write the report")
+    paper, pooled, beyond = pool_counts()
+    tables = commands.add_parser("tables", help=f"run Table I/II and write the report: {pooled} co-simulations "
+                                                f"in one pool (the {paper} cases at their step and at half of it, "
+                                                f"{beyond} of the third-order plant beyond the paper), then finer "
+                                                "ones for the claims left open (--refine)")
     tables.add_argument("--out", default="results", help="output folder (default results/, ignored by git)")
     tables.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
     tables.add_argument("--stop", type=cli_args.positive_float,
