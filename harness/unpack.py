@@ -151,8 +151,8 @@ def check_archive(path, limits: Limits | None = None, nested: tuple = ()) -> int
 
 
 def extract_archive(path, folder, limits: Limits | None = None) -> Path:
-    """Unpack the archive at ``path`` into the existing folder ``folder`` after :func:`check_archive`; on any
-    failure what was unpacked is removed (the folder is left empty) and the error names the archive."""
+    """Unpack the archive at ``path`` into the existing, empty folder ``folder`` after :func:`check_archive`; on
+    any failure what was unpacked is removed (the folder is left empty) and the error names the archive."""
     check_archive(path, limits)
     folder = Path(folder)
     root = folder.resolve()

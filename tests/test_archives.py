@@ -227,3 +227,12 @@ def test_the_unpack_folder_is_removed_at_exit_and_a_dead_processes_folder_by_the
     assert left.exists()  # a killed process removes nothing ...
     unpack.remove_dead_folders()  # what the next process's first unpack folder does
     assert not left.exists()
+
+
+def test_docs_master_quotes_the_limits():
+    text = " ".join((Path(__file__).resolve().parents[1] / "docs" / "master.md").read_text().split())
+    limits = unpack.Limits()
+    assert (f"at most {limits.entries} entries, {limits.entry_bytes >> 30} GiB declared per entry and "
+            f"{limits.total_bytes >> 30} GiB in all") in text
+    assert f"more than {unpack.RATIO_FROM_BYTES >> 20} MiB expanding at most {limits.ratio:g} times" in text
+    assert unpack.LIMIT_VARIABLE in text and unpack.UNPACK_DIR_VARIABLE in text
