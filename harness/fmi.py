@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import os
 import re
 import zipfile
 from dataclasses import dataclass, field

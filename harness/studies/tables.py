@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import csv
 import math
-import shutil
 import sys
 import time as clock
 from pathlib import Path
