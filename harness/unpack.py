@@ -272,12 +272,34 @@ def private_temporary_folder(label: str):
 def process_alive(pid) -> bool:
     """Whether process ``pid`` of this host is running (one that cannot be asked counts as running)."""
     try:
-        os.kill(int(pid), 0)
+        pid = int(pid)
+    except (TypeError, ValueError):
+        return True
+    if sys.platform.startswith("win"):  # os.kill(pid, 0) would send CTRL_C_EVENT there: ask the kernel instead
+        return _windows_process_alive(pid)
+    try:
+        os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except (PermissionError, TypeError, ValueError, OverflowError, OSError):
+    except (PermissionError, OverflowError, OSError):
         return True
     return True
+
+
+def _windows_process_alive(pid: int) -> bool:
+    import ctypes  # here, not at module level: Windows only
+
+    kernel32 = ctypes.WinDLL("kernel32", use_last_error=True)
+    handle = kernel32.OpenProcess(0x1000, False, pid)  # PROCESS_QUERY_LIMITED_INFORMATION
+    if not handle:
+        return ctypes.get_last_error() != 87  # ERROR_INVALID_PARAMETER: no such process; denied: running
+    try:
+        code = ctypes.c_ulong()
+        if not kernel32.GetExitCodeProcess(handle, ctypes.byref(code)):
+            return True
+        return code.value == 259  # STILL_ACTIVE
+    finally:
+        kernel32.CloseHandle(handle)
 
 
 def remove_dead_folders() -> None:
