@@ -230,6 +230,9 @@ def load(name_or_path) -> Scenario:
             data = tomllib.load(stream)
         except tomllib.TOMLDecodeError as error:
             raise ScenarioError(f"{path} is not valid TOML: {error}") from None
+        except UnicodeDecodeError as error:  # TOML is UTF-8 text: a binary file or another encoding
+            raise ScenarioError(f"{path} is not a TOML file: byte {error.start} is not UTF-8 text "
+                                f"({error.reason})") from None
     return parse(data, path)
 
 
@@ -239,6 +242,10 @@ def load(name_or_path) -> Scenario:
 
 ANY_INSTANCE, ANY_PARAMETER, ANY_SIGNAL = "INSTANCE", "PARAMETER", "INSTANCE.VARIABLE"  # names the user chooses
 CHOSEN_NAMES = (ANY_INSTANCE, ANY_PARAMETER, ANY_SIGNAL)
+#: an instance name: it becomes part of file and folder names, of the FMU's resource URI and of SSP names, so
+#: ASCII letters, digits and '_' only, not starting with a digit (as an identifier of C, Modelica or SSP)
+INSTANCE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+INSTANCE_NAME_RULE = "ASCII letters, digits and '_', not starting with a digit"
 
 
 def _is_number(value) -> bool:
@@ -306,7 +313,8 @@ SCHEMA = (
         "a run stops as diverged when a connected or recorded signal without its own [bounds] entry "
         "reaches this magnitude or is not finite"),
     Key("", "components", TABLE, REQUIRED, "the FMU instances, one table each"),
-    Key("components", ANY_INSTANCE, TABLE, Described("one or more"), "one FMU instance; its name has no '.'"),
+    Key("components", ANY_INSTANCE, TABLE, Described("one or more"),
+        f"one FMU instance; its name: {INSTANCE_NAME_RULE}"),
     Key("components.INSTANCE", "fmu", TEXT, REQUIRED,
         "a model identifier built by build_fmu.py (AdaptiveFuzzyController, InvertedPendulum, Manipulator, "
         "DcMotorArm, TrackingReference) or the path of an .fmu file, relative to the scenario file"),
@@ -356,8 +364,8 @@ def _check_table(data: dict, table: str, dotted: str, shown: str, where: str):
             place = "" if shown else " at the top level"
             raise ScenarioError(f"{prefix}unknown key {name!r}{place}{did_you_mean(name, named)}; "
                                 f"valid: {', '.join(named)}")
-        if key.name == ANY_INSTANCE and "." in name:
-            raise ScenarioError(f"{prefix}instance name {name!r} must not contain '.'")
+        if key.name == ANY_INSTANCE and not INSTANCE_NAME.fullmatch(name):
+            raise ScenarioError(f"{prefix}instance name {name!r} is not allowed: use {INSTANCE_NAME_RULE}")
         if key.name == ANY_SIGNAL and not _is_dotted(name):
             raise ScenarioError(f"{prefix}{name!r} is not a signal name; write \"INSTANCE.VARIABLE\" = bound")
         if not key.kind.accepts(value):

@@ -23,6 +23,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
 from .. import termination
+from ..unpack import remove_dead_folders
 from .tasks import Done, WorkerLost, forget_worker_state, run_task
 
 IN_FLIGHT_PER_WORKER = 2  # tasks handed to the pool per worker: one running, one ready to start
@@ -152,6 +153,7 @@ class LocalPool:
         self.executor.shutdown(wait=False, cancel_futures=True)
         self.executor = self._start()
         self.lost_workers += 1
+        remove_dead_folders()  # what the dead worker had unpacked (harness/unpack.py)
         if not codes:
             return "ended abruptly"
         # a broken pool terminates its other workers (SIGTERM): the dead one is the one that did not get that

@@ -20,7 +20,9 @@ from pathlib import Path
 
 from harness.fmu_build import native as build_native
 from harness.fmu_build.native_stages import ls_ref
-from harness.fmu_build.catalog import FMUS, FmuSource, model_class, ordinary_file_mode, selected_edition
+from harness.atomic_files import ordinary_file_mode
+from harness.atomic_files import write_text as atomic_write_text
+from harness.fmu_build.catalog import FMUS, FmuSource, model_class, selected_edition
 from harness.fmu_build.staging import stage
 from harness.scenario import keys_markdown
 
@@ -208,7 +210,7 @@ def main(argv=None) -> int:
                                     (MASTER_DOC, with_scenario_keys, "scenario keys")):
             text = page.read_text()
             updated = rewrite(text)
-            page.write_text(updated)
+            atomic_write_text(page, updated)
             print(f"{page.relative_to(ROOT)}: {what} " + ("updated" if updated != text else "already current"))
     return 0
 

@@ -3,30 +3,13 @@ Mach-O for FMI 2.0's darwin64), the FMI-LS-REF files, zipped reproducibly and wr
 from __future__ import annotations
 
 import io
-import os
 import struct
 import sys
-import tempfile
 import zipfile
 from pathlib import Path
 
 from harness.fmu_build import catalog as fmu_catalog
 from harness.fmu_build.native_stages import LAYER, ls_ref
-
-
-def atomic_write(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(data)
-        fmu_catalog.ordinary_file_mode(temporary)
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
-
 
 
 def fat_macho(binaries: list[bytes]) -> bytes:
