@@ -43,7 +43,7 @@ def run_command(args) -> int:
     if not me and (args.rtol is not None or args.atol is not None):
         raise cli_args.UsageError(f"--rtol and --atol are tolerances of --algorithm me; --algorithm {args.algorithm} "
                                   "has a communication step (--step)")
-    scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
+    scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop, hardware=args.hardware)
     cli_args.check_output_interval(args.output_interval, scenario.step)
     if args.out:
         cli_args.check_writable([args.out])
@@ -110,6 +110,9 @@ def register_run(commands):
     run.add_argument("--step", type=cli_args.positive_float,
                      help="communication step in s (default: the scenario's); with --algorithm me the output interval")
     run.add_argument("--stop", type=cli_args.positive_float, help="stop time in s (default: the scenario's)")
+    run.add_argument("--hardware", metavar="FILE", type=cli_args.existing_file,
+                     help="a TOML file with a [hardware] table: a sensor and an actuator inserted between the plant "
+                          "and the controller (docs/master.md, Hardware in the loop)")
     run.add_argument("--algorithm", choices=ALGORITHMS, default="feedthrough",
                      help="feedthrough: no delay along direct-feedthrough chains (default); "
                           "jacobi: every connection delayed one step; me: Model Exchange, no communication step "

@@ -361,7 +361,7 @@ SCHEMA = (
     Key("hardware", "delay_samples", DELAY, 0, "the sensor's delay in samples; needs sample_period > 0"),
     Key("hardware", "filter_time_constant", NON_NEGATIVE, 0.0,
         "the sensor's first-order filter, time constant (s); 0: none; needs sample_period > 0"),
-    Key("hardware", "u_max", LIMIT, 0.0, "the actuator's saturation |u| <= u_max, in the unit of u"),
+    Key("hardware", "u_max", LIMIT, 0.0, "the actuator's saturation, -u_max <= u <= u_max, in the unit of u"),
     Key("hardware", "rate_limit", LIMIT, 0.0, "the actuator's largest rate of u, in the unit of u per second"),
     Key("hardware", "rate_time_constant", POSITIVE, 1e-3, "the rate limiter's time constant Td (s)"),
     Key("hardware", "actuator_delay_samples", DELAY, 0, "the actuator's delay in samples; needs sample_period > 0"),
@@ -512,6 +512,13 @@ def with_hardware(scenario: Scenario, table: dict, where: str = "scenario") -> S
         raise ScenarioError(f"{prefix} the scenario {scenario.name!r} already has hardware inserted; give one "
                             "[hardware] table (the scenario's or --hardware's), not both")
     _check_table(table, "hardware", "hardware", "[hardware]", where)
+    if not table.get("sample_period", 0.0):
+        clocked = [name for name in (*(f"noise_{c}" for c in SENSOR_CHANNELS), "delay_samples", "filter_time_constant",
+                                     "actuator_delay_samples") if table.get(name, 0)]
+        if clocked:
+            raise ScenarioError(f"{prefix} {clocked[0]} = {_shown(table[clocked[0]])} needs the clock of the sensor and "
+                                "the actuator (noise is drawn, delays counted and the filter run once per sample); "
+                                f"give sample_period > 0, or {clocked[0]} = 0")
     result = copy.deepcopy(scenario)
     plant = table.get("plant", "plant")
     if plant not in result.components:
