@@ -100,6 +100,8 @@ SLOW = {
         "test_a_clockless_quantiser_is_refused_in_model_exchange_and_kept_in_co_simulation",),
     "test_hardware_scenario.py": ("test_neutral_hardware_gives_todays_records_bit_for_bit",
         "test_a_jacobi_host_gets_the_hardwares_warning_and_a_feedthrough_master_none",),
+    "test_hardware_study.py": ("test_the_committed_csv_is_what_the_command_computes",
+        "test_a_short_run_of_the_command_writes_its_csv_and_section",),
     "test_host_robustness.py": ("test_chatter_in_jacobi_warns_once", "test_no_warning_in_our_masters_converged_runs",
         "test_pinned_e0_de0_set_the_modified_error", "test_pinned_initial_error_is_used_without_warning",
         "test_plain_gauss_seidel_in_every_order_gets_the_converged_result",
