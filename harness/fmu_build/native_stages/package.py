@@ -76,7 +76,8 @@ def fmu_files(model: fmu_catalog.FmuSource, descriptions: dict[int, bytes], head
         files[3][f"binaries/{target.fmi3_folder}/{name}{target.extension}"] = binaries[(3, target)].read_bytes()
     if darwin:
         files[2][f"binaries/darwin64/{name}.dylib"] = fat_macho(darwin)
+    stored = name in ls_ref.stored_models()  # not yet for a new FMU's first build (harness.fmu_build.builder.ls_ref_model)
     for version in (2, 3):  # FMI-LS-REF: the reference is this machine's run of the FMU (harness.fmu_build.native_stages.ls_ref)
-        if ls_ref.runs_here(files[version], version):
+        if stored and ls_ref.runs_here(files[version], version):
             files[version].update(ls_ref.ls_ref_files(ls_ref.load(name), files[version]))
     return files
