@@ -44,7 +44,8 @@ CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harne
         "harness.master_loop", "harness.scores", "harness.cases", "harness.units", "harness.me_master",
         "harness.me_loop", "harness.cvode", "harness.scenario_toml", "harness.progress", "harness.termination",
         "harness.unpack", "harness.atomic_files", "harness.executors", "harness.executors.tasks",
-        "harness.executors.local_pool", "harness.executors.dask_pool", "harness.executors.choose"}
+        "harness.executors.local_pool", "harness.executors.dask_pool", "harness.executors.choose",
+        "harness.executors.stream"}
 COMPOSITION_ROOT = "harness.cli"
 STUDIES, HOSTS = "harness.studies", "harness.hosts"
 #: what the master's compiled loop may never reach, directly or through other modules
@@ -56,7 +57,7 @@ CHAINS = {
     "harness.studies.tune": ("errors", "space", "objective", "candidate", "config", "storage", "loop",
                              "scenario_file", "summary", "report", "comparison", "study", "command_line"),
     "harness.studies.regression": ("runs", "references", "comparison", "figures", "report", "command"),
-    "harness.executors": ("tasks", "local_pool", "dask_pool", "choose"),
+    "harness.executors": ("tasks", "local_pool", "dask_pool", "choose", "stream"),
     "harness.studies.sweep": ("grid", "csv_rows", "executors", "heatmap", "run", "command_line"),
     "harness.hosts": ("trajectory", "console_capture", "plain_fmpy", "host_runners", "host_registry", "matrix_row",
                       "matrix_prose", "matrix_report", "matrix"),

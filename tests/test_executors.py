@@ -1,6 +1,8 @@
 """harness/executors/: every task done exactly once under its key, in this process or on a local pool;
 the tasks of a lost worker run again, the culprit alone; per-worker state kept across tasks; files
-given once reach every task; a task's own error is its outcome, not a lost worker.
+given once reach every task; a task's own error is its outcome, not a lost worker.  A study's stream of
+keyed items (stream.py): each key once, what is done skipped, several items per task, the items read as
+the work goes, a batch whose worker dies split so that only its culprit is lost.
 
 (The Dask pool runs against separately started scheduler and worker processes in tests/test_cluster.py.)
 """
@@ -13,7 +15,7 @@ from collections import Counter
 import pytest
 
 from harness.executors import (Done, ExecutorError, InlinePool, LocalPool, WorkerLost, open_executor,
-                               worker_state)
+                               stream_tasks, worker_state)
 from harness.executors import tasks
 
 
@@ -178,3 +180,46 @@ def test_open_executor_gives_what_the_options_ask():
     with pytest.raises(ValueError, match="at least one worker"):
         LocalPool(0)
     assert issubclass(ExecutorError, ValueError) and Done("k", 1).ok and not Done("k", error=WorkerLost()).ok
+
+
+def drawn(count: int, pulled: list):
+    """(key, item) of ``count`` draws, noting in ``pulled`` how many were read."""
+    for index in range(count):
+        pulled.append(index)
+        yield f"s{index}", index
+
+
+@pytest.mark.parametrize("batch, window", [(1, None), (4, 2), (5, 1)])
+def test_a_stream_gives_each_key_once_skips_what_is_done_and_reads_the_items_as_it_goes(batch, window):
+    pulled, done_before = [], {"s0", "s5", "s29"}
+    with InlinePool() as pool:
+        stream = stream_tasks(pool, fail_on_three, drawn(30, pulled), done=done_before, batch=batch, window=window)
+        first = next(stream)
+        # one window of batches read, plus the recorded keys skipped on the way
+        assert len(pulled) <= (window or 2) * batch + len(done_before), pulled
+        finished = [first, *stream]
+    keys = Counter(d.key for d in finished)
+    assert keys == Counter(f"s{i}" for i in range(30) if f"s{i}" not in done_before)  # each once, none done again
+    assert all(d.value == int(d.key[1:]) for d in finished if d.key != "s3")
+    failed = [d for d in finished if not d.ok]
+    assert [d.key for d in failed] == ["s3"] and str(failed[0].error) == "no 3"  # its own error; its batch went on
+
+
+def test_a_stream_refuses_a_key_given_twice_and_an_empty_batch():
+    with InlinePool() as pool:
+        with pytest.raises(ValueError, match="the key 'a' is given twice"):
+            list(stream_tasks(pool, square, [("a", 1), ("b", 2), ("a", 3)]))
+        with pytest.raises(ValueError, match="at least one item, not 0"):
+            list(stream_tasks(pool, square, [("a", 1)], batch=0))
+        with pytest.raises(ValueError, match="at least one task, not 0"):
+            list(stream_tasks(pool, square, [("a", 1)], window=0))
+        assert list(stream_tasks(pool, square, [("a", 1)], done={"a"})) == []
+
+
+def test_a_batch_whose_worker_dies_is_split_and_only_its_culprit_is_lost():
+    with LocalPool(2) as pool:
+        finished = list(stream_tasks(pool, crash_on_seven, ((item, item) for item in range(16)), batch=4))
+    assert Counter(d.key for d in finished) == Counter(range(16))  # every item once, none twice
+    lost = [d for d in finished if not d.ok]
+    assert [d.key for d in lost] == [7] and isinstance(lost[0].error, WorkerLost)
+    assert all(d.value == d.key for d in finished if d.ok)

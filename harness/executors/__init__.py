@@ -5,7 +5,8 @@ interface (docs/architecture.md, "Executors").
 Every executor has ``submit(function, item, key)``, ``next_done()`` (blocks until at least one task is
 done and returns their :class:`Done` records, each task exactly once), ``as_completed()``,
 ``pending()``, ``slots`` (tasks it runs at once), ``describe()`` and ``close(cancel)``; a study
-streams its results as they come and keeps its own resumable record of what is done.  Files the
+streams its results as they come and keeps its own resumable record of what is done
+(:func:`stream_tasks`: its items by key, those already recorded skipped, several per task).  Files the
 tasks read (the FMUs) are given once and travel once to each worker; per-worker state
 (:func:`worker_state`) keeps extracted or instantiated FMUs from one task to the next.
 
@@ -18,6 +19,8 @@ One idea per module, each importing only those above it:
                  tasks of a lost worker
 ``dask_pool``    a dask.distributed scheduler (DaskPool): files scattered once, a lost scheduler
 ``choose``       the executor of ``--jobs`` / ``--scheduler`` (open_executor)
+``stream``       a study's keyed items as tasks: what is done skipped, batches, a bounded window
+                 (stream_tasks)
 ===============  ======================================================================
 """
 from __future__ import annotations
@@ -25,7 +28,8 @@ from __future__ import annotations
 from .choose import default_jobs, open_executor
 from .dask_pool import DaskPool
 from .local_pool import InlinePool, LocalPool
+from .stream import stream_tasks
 from .tasks import Done, ExecutorError, SchedulerLost, WorkerLost, worker_state
 
 __all__ = ["open_executor", "default_jobs", "DaskPool", "InlinePool", "LocalPool", "Done", "ExecutorError",
-           "SchedulerLost", "WorkerLost", "worker_state"]
+           "SchedulerLost", "WorkerLost", "worker_state", "stream_tasks"]
