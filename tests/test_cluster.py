@@ -1,12 +1,16 @@
 """The studies on a Dask cluster of separate processes, as a user runs one: ``dask scheduler`` and two ``dask
 worker`` processes started with docs/studies.md's commands (tests/cluster_helpers.py, the ``dask_cluster``
 fixture).  A sweep and a short tune give the local pool's rows; a worker killed with SIGKILL mid-sweep loses
-nothing and counts nothing twice; the scheduler gone mid-run is one line, and the run resumes.
+nothing and counts nothing twice; the scheduler gone mid-run is one line, and the run resumes.  The
+recipe of a study of many short runs (docs/architecture.md, the Monte Carlo study's shape) runs as
+written on the cluster: a worker killed and the run interrupted, then resumed, give the local pool's rows.
 """
 from __future__ import annotations
 
 import csv
+import importlib.util
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -16,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from harness.cli import main as cli_main
-from harness.executors import dask_pool, tasks
+from harness.executors import DaskPool, LocalPool, dask_pool, tasks
 from harness.studies import sweep
 from tests.cluster_helpers import SCHEDULER_COMMAND, WORKER_COMMAND
 
@@ -184,3 +188,60 @@ def test_a_short_tune_on_the_cluster_finishes_as_the_local_pool_does(dask_cluste
     trials = optuna.load_study(study_name="long", storage=url).get_trials()
     assert sum(t.state in finished for t in trials) == 16
     assert not [t for t in trials if t.state == optuna.trial.TrialState.RUNNING]
+
+
+def recipe_module(folder: Path):
+    """The sketch of docs/architecture.md's "A study of many short runs" as a module of its own
+    (``monte_carlo_sketch.py`` in ``folder``, where its rows go too)."""
+    page = (ROOT / "docs" / "architecture.md").read_text()
+    section = page[page.index("### A study of many short runs"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    path = folder / "monte_carlo_sketch.py"
+    path.write_text(code)
+    spec = importlib.util.spec_from_file_location("monte_carlo_sketch", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # the local pool's spawned workers import it by name (sys.path below)
+    spec.loader.exec_module(module)
+    module.ROWS = folder / "rows.csv"
+    return module
+
+
+def test_the_recipe_of_a_study_of_short_runs_survives_a_killed_worker_and_an_interrupt(dask_cluster, fmu_paths,
+                                                                                     tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(tmp_path))
+    sketch = recipe_module(tmp_path)
+    monkeypatch.setattr(sketch, "DRAWS", 12)  # 24 runs: a worker killed mid-run still holds a task
+    files = sketch.fmu_files()
+    try:
+        sketch.ROWS = tmp_path / "local.csv"
+        with LocalPool(2, files) as pool:
+            sketch.run(pool)
+        local = sketch.ROWS.read_text().splitlines()
+        assert len(local) == len(set(local)) == 24 and all(",ok," in line for line in local)
+
+        sketch.ROWS = tmp_path / "dask.csv"
+        streamed, killed = sketch.stream_tasks, []
+
+        def kill_then_interrupt(*args, **kwargs):  # the sketch's loop, with a worker lost and a Ctrl-C
+            for count, finished in enumerate(streamed(*args, **kwargs), 1):
+                yield finished
+                if count == 2:
+                    killed.append(pool.pending())
+                    dask_cluster.kill_worker(0)
+                if count == 14:
+                    raise KeyboardInterrupt
+
+        monkeypatch.setattr(sketch, "stream_tasks", kill_then_interrupt)
+        with pytest.raises(KeyboardInterrupt), DaskPool(dask_cluster.address, files) as pool:
+            pool.client.upload_file(sketch.__file__)  # the study's module, as a user ships one to a cluster
+            sketch.run(pool)
+        assert killed and killed[0] > 0, "the worker was killed with nothing in flight"
+        assert len(sketch.ROWS.read_text().splitlines()) == 14
+        monkeypatch.setattr(sketch, "stream_tasks", streamed)
+        with DaskPool(dask_cluster.address, files) as pool:  # resumed on the one worker left
+            assert len(sketch.run(pool)) == 14
+        remote = sketch.ROWS.read_text().splitlines()
+        assert len(remote) == len(set(remote)) == 24  # nothing lost, nothing twice
+        assert sorted(remote) == sorted(local)  # the local pool's rows, bit for bit
+    finally:
+        sys.modules.pop("monte_carlo_sketch", None)

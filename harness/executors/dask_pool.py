@@ -145,6 +145,8 @@ class DaskPool:
                 if future.status == "finished":
                     results.append(Done(key, value))
                 elif future.status == "error":
+                    if isinstance(value, tuple):  # as_completed gives an error as (type, exception, traceback)
+                        value = next((part for part in value if isinstance(part, BaseException)), value)
                     if isinstance(value, self.killed_worker):
                         value = WorkerLost(f"the scheduler gave up on it: {value}")
                     results.append(Done(key, error=value))

@@ -71,27 +71,30 @@ def stream_tasks(executor, function, items, done=(), batch: int = 1, window: int
                 break
         return tuple(entries)
 
-    while True:
+    def fill() -> None:
+        nonlocal in_flight
         limit = window or 2 * max(1, executor.slots)
         while in_flight < limit:
             entries = next_entries()
             if not entries:
-                break
+                return
             executor.submit(task, entries, key=entries)
             in_flight += 1
-        if not in_flight:
-            return
+
+    fill()
+    while in_flight:
+        outcomes = []
         for finished in executor.next_done():
             in_flight -= 1
             entries = finished.key
             if finished.ok:
-                for key, value, error in finished.value:
-                    yield Done(key, value, error)
+                outcomes += [Done(key, value, error) for key, value, error in finished.value]
             elif isinstance(finished.error, WorkerLost) and len(entries) > 1:
                 retries.extend(entries)  # each alone: only the one that kills its worker is lost
             else:
-                for key, _ in entries:
-                    yield Done(key, error=finished.error)
+                outcomes += [Done(key, error=finished.error) for key, _ in entries]
+        fill()  # the workers get their next tasks before the caller handles these
+        yield from outcomes
 
 
 __all__ = ["stream_tasks", "run_batch"]
