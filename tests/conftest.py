@@ -4,6 +4,7 @@ At the end of a session the summary lists what the session left in the temporary
 directory (pytest's own pytest-of-USER folder aside): a run should leave nothing.
 On a machine where other processes share the folder, their new entries appear too.
 """
+import importlib.util
 import os
 import sys
 import tempfile
@@ -262,17 +263,30 @@ def fmu_paths():
     return build_fmu.ensure_built()
 
 
+#: set by .ci/run: a server the tests start (PostgreSQL, Dask) that cannot be had fails its tests instead of
+#: skipping them, so that CI runs them or says why not
+REQUIRE_SERVERS = os.environ.get("AFC_REQUIRE_SERVERS") == "1"
+
+
+def _unavailable(reason: str):
+    """Skip, or fail where the servers are required (AFC_REQUIRE_SERVERS=1)."""
+    if REQUIRE_SERVERS:
+        pytest.fail(f"{reason}; AFC_REQUIRE_SERVERS=1 (.ci/run) requires it", pytrace=False)
+    pytest.skip(reason)
+
+
 @pytest.fixture(scope="session")
 def postgres():
     """A throwaway PostgreSQL server on 127.0.0.1 with a password, for the session (tests/cluster_helpers.py);
-    skipped only where PostgreSQL or its driver is missing (.ci/run installs Debian's package, the test
-    extra psycopg)."""
+    skipped where PostgreSQL or its driver is missing, unless AFC_REQUIRE_SERVERS=1 (.ci/run installs
+    Debian's package, the test extra psycopg, and requires them)."""
     from tests.cluster_helpers import PostgresServer, postgres_bin
 
     bin_dir = postgres_bin()
     if bin_dir is None:
-        pytest.skip("PostgreSQL is not installed (apt-get install postgresql; .ci/run installs it)")
-    pytest.importorskip("psycopg", reason="the PostgreSQL driver of the postgres extra")
+        _unavailable("PostgreSQL is not installed (apt-get install postgresql; .ci/run installs it)")
+    if importlib.util.find_spec("psycopg") is None:
+        _unavailable("psycopg, the PostgreSQL driver of the postgres extra, is not installed")
     with PostgresServer(bin_dir) as server:
         yield server
 
@@ -281,7 +295,8 @@ def postgres():
 def dask_cluster(tmp_path):
     """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1, one thread each, started with the
     commands docs/studies.md prints (tests/cluster_helpers.py) and stopped after the test."""
-    pytest.importorskip("distributed", reason="the cluster extra")
+    if importlib.util.find_spec("distributed") is None:
+        _unavailable("dask.distributed, of the cluster extra, is not installed")
     from tests.cluster_helpers import DaskCluster
 
     with DaskCluster(2, tmp_path / "dask") as cluster:

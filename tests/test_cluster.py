@@ -25,7 +25,6 @@ from harness.executors import DaskPool, LocalPool, dask_pool, tasks
 from harness.studies import sweep
 from tests.cluster_helpers import SCHEDULER_COMMAND, WORKER_COMMAND
 
-pytest.importorskip("distributed")
 ROOT = Path(__file__).resolve().parents[1]
 # short horizon, coarse step: a point takes ~0.1 s; gamma = 3e5 diverges for some points (rows with a reason)
 SMALL = ["pendulum_case2", "--controller", "all", "--grid", "plant.mp=0.1:1:2", "--grid", "controller.gamma=300,300000",
