@@ -12,6 +12,7 @@ from __future__ import annotations
 import glob
 import os
 import pwd
+import re
 import secrets
 import shutil
 import signal
@@ -197,6 +198,25 @@ class DaskCluster:
     def logs(self) -> str:
         return " | ".join(f"{path.name}: {path.read_text(errors='replace')[-600:]}"
                           for path in sorted(self.folder.glob("*.log")))
+
+    def worker_address(self, index: int) -> str:
+        """The address worker ``index`` registered with (its log's last start)."""
+        text = (self.folder / f"worker{index}.log").read_text(errors="replace")
+        return re.findall(r"Start worker at:\s+(\S+)", text)[-1]
+
+    def busy_worker(self, timeout_s: float = START_TIMEOUT_S) -> int:
+        """The index of a live worker that holds a task now (waits for one): a kill that loses work."""
+        from distributed import Client
+
+        deadline = time.monotonic() + timeout_s
+        with Client(self.address, timeout=f"{int(timeout_s)}s", set_as_default=False) as client:
+            while time.monotonic() < deadline:
+                processing = client.processing()
+                for index, process in enumerate(self.workers):
+                    if process.poll() is None and processing.get(self.worker_address(index)):
+                        return index
+                time.sleep(0.01)
+        raise RuntimeError(f"no Dask worker held a task within {timeout_s:g} s: {self.logs()}")
 
     def kill_worker(self, index: int) -> None:
         """SIGKILL to a worker command and everything under it, as when its host is lost."""
