@@ -1,12 +1,13 @@
 """The figures of docs/performance.md's section on sweeps over executors (run by hand, not a test):
 
-    python -m tests.scaling [--edition python|native] [--points N] [--stop T] [--tasks N]
+    python -m tests.scaling [--edition python|native] [--points N] [--stop T] [--tasks N] [--no-sweep]
 
 The same sweep on a local pool of 1 and of 2 processes and on a Dask cluster of a scheduler and two
 workers started as separate processes (tests/cluster_helpers.py): wall time and parallel efficiency
 (T1 / (2 T2)); then what a task costs each executor beside the work, from tasks that do nothing
-(submission to result, per task, with the pool already started), against one run's cost. The load
-average is printed beside every figure: the machine is shared.
+(submission to result, per task, with the pool already started), against one run's cost; and what an item costs through harness/executors/stream.py at one item per task
+and at ten (``--no-sweep``: these figures alone). The load average is printed beside every figure: the
+machine is shared.
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from harness.executors import DaskPool, LocalPool  # noqa: E402
+from harness.executors import DaskPool, LocalPool, stream_tasks  # noqa: E402
 from harness.fmu_build import builder as build_fmu  # noqa: E402
 from harness.studies import sweep  # noqa: E402
 from tests.cluster_helpers import DaskCluster  # noqa: E402
@@ -68,13 +69,35 @@ def per_task(executor, count: int) -> float:
     return (time.perf_counter() - began) / count
 
 
+def per_item(executor, count: int, batch: int) -> float:
+    """Seconds per do-nothing item streamed ``batch`` to a task, the workers already started."""
+    list(stream_tasks(executor, nothing, ((item, item) for item in range(executor.slots * 2))))  # warm
+    began = time.perf_counter()
+    done = list(stream_tasks(executor, nothing, ((item, item) for item in range(count)), batch=batch))
+    assert len(done) == count and all(d.ok for d in done)
+    return (time.perf_counter() - began) / count
+
+
+def streams(executors: dict, count: int) -> None:
+    for name, executor in executors.items():
+        costs = {batch: per_item(executor, count, batch) for batch in (1, 10)}
+        print(f"  a do-nothing item through stream_tasks on {name}: "
+              + ", ".join(f"{1e3 * cost:.3f} ms at {batch} per task" for batch, cost in costs.items())
+              + f" ({load()})", flush=True)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--edition", default="python")
     parser.add_argument("--points", type=int, default=16)
     parser.add_argument("--stop", type=float, default=5.0)
     parser.add_argument("--tasks", type=int, default=2000, help="do-nothing tasks per executor")
+    parser.add_argument("--no-sweep", action="store_true", help="the stream's figures only")
     args = parser.parse_args(argv)
+    if args.no_sweep:
+        with DaskCluster(2) as cluster, DaskPool(cluster.address) as dask, LocalPool(2) as local:
+            streams({"a local pool of 2": local, "Dask, 2 workers": dask}, args.tasks)
+        return 0
     os.environ["AFC_EDITION"] = args.edition
     fmu_paths = build_fmu.ensure_built(edition=args.edition)
     grids = [sweep.parse_grid(f"plant.mp=0.1:2:{args.points // 2}"), sweep.parse_grid("plant.dist_gain=0,2")]
@@ -102,6 +125,7 @@ def main(argv=None) -> int:
         opened = time.perf_counter() - began
         try:
             dask_task = per_task(pool, max(200, args.tasks // 4))
+            streams({"Dask, 2 workers": pool}, max(200, args.tasks // 4))
         finally:
             pool.close()
         print(f"  Dask client: connect, check the workers, scatter the FMUs: {opened:.2f} s ({load()})")
@@ -113,6 +137,7 @@ def main(argv=None) -> int:
         list(pool.as_completed())
         started = time.perf_counter() - began
         local_task = per_task(pool, args.tasks)
+        streams({"a local pool of 2": pool}, args.tasks)
     print(f"  starting a local pool of 2 (spawn, imports, a first task each): {started:.2f} s ({load()})")
     print(f"  a do-nothing task, submission to result: local pool {1e3 * local_task:.3f} ms, "
           f"Dask {1e3 * dask_task:.2f} ms ({load()})")
