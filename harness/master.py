@@ -307,8 +307,7 @@ class Master:
             raise SimulationFailed(str(error), result, error) from error
         finally:
             self.logs = {name: component.log for name, component in self.components.items()}  # the FMUs' messages
-            for component in self.components.values():
-                component.free()
+            self._release_components(completed=record is not None and self.rows_done == steps + 1)
             self.components = {}
             self._end_run()
         return self._result(record, self.rows_done, clock.perf_counter() - wall_start, complete=True)
@@ -351,6 +350,12 @@ class Master:
             if action.copies is None and action.recorded:
                 row[action.first_column:action.first_column + action.recorded] = action.view[:action.recorded]
         self.rows_done = steps + 1
+
+    def _release_components(self, completed: bool):
+        """After a run, whether it ``completed`` or not: every FMU freed (a master that reuses its
+        instances from run to run keeps them here)."""
+        for component in self.components.values():
+            component.free()
 
     def _end_run(self):
         """After every FMU is freed, whether the run completed or not."""
