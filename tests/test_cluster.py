@@ -1,7 +1,8 @@
 """The studies on a Dask cluster of separate processes, as a user runs one: ``dask scheduler`` and two ``dask
 worker`` processes started with docs/studies.md's commands (tests/cluster_helpers.py, the ``dask_cluster``
 fixture).  A sweep and a short tune give the local pool's rows; a worker killed with SIGKILL mid-sweep loses
-nothing and counts nothing twice; the scheduler gone mid-run is one line, and the run resumes.  The
+nothing and counts nothing twice; the scheduler gone mid-run is one line, and the run resumes.  A short
+Monte Carlo robustness study gives the local pool's rows, and a worker killed mid-study loses none.  The
 recipe of a study of many short runs (docs/architecture.md, the Monte Carlo study's shape) runs as
 written on the cluster: a worker killed and the run interrupted, then resumed, give the local pool's rows.
 """
@@ -22,7 +23,7 @@ import pytest
 
 from harness.cli import main as cli_main
 from harness.executors import DaskPool, LocalPool, dask_pool, tasks
-from harness.studies import sweep
+from harness.studies import robustness, sweep
 from tests.cluster_helpers import SCHEDULER_COMMAND, WORKER_COMMAND
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -262,3 +263,51 @@ def test_the_recipe_of_a_study_of_short_runs_survives_a_killed_worker_and_an_int
         assert sorted(remote) == sorted(local)  # the local pool's rows, bit for bit
     finally:
         sys.modules.pop("monte_carlo_sketch", None)
+
+
+# ------------------------------------------------------------------ the Monte Carlo robustness study
+ROBUST_PARAMS = ("plant.mp=loguniform:0.05:2", "plant.dist_gain=uniform:0:2")
+
+
+def study_rows(path) -> dict:
+    """{(sample, controller): the cells but the wall and loop times}; a run twice is an error."""
+    with open(path, newline="") as stream:
+        table = list(csv.DictReader(stream))
+    keyed = {(row["sample"], row["controller"]): {k: v for k, v in row.items() if k not in ("wall_s", "loop_s")}
+             for row in table}
+    assert len(keyed) == len(table), "a run appears twice"
+    return keyed
+
+
+def robustness_plan(fmu_paths, samples, controllers, stop):
+    return robustness.plan_study("pendulum_case2", controllers, [robustness.parse_param(p) for p in ROBUST_PARAMS],
+                                 samples, seed=5, stop=stop, step=1e-3, fmu_paths=fmu_paths)
+
+
+def test_a_monte_carlo_study_on_the_cluster_gives_the_local_pools_rows(dask_cluster, fmu_paths, tmp_path):
+    plan = robustness_plan(fmu_paths, 4, ("vud", "fixed", "fae"), 0.5)
+    local = robustness.run_study(plan, tmp_path / "local", jobs=2, progress=False, plot=False)
+    remote = robustness.run_study(plan, tmp_path / "dask", scheduler=dask_cluster.address, batch=3, progress=False,
+                                  plot=False)
+    assert (local.computed, remote.computed, remote.lost) == (12, 12, 0) and remote.executor.startswith("Dask")
+    rows = study_rows(tmp_path / "dask" / "robustness.csv")
+    assert rows == study_rows(tmp_path / "local" / "robustness.csv") and len(rows) == 12  # bit for bit
+    assert remote.summary["controllers"] == local.summary["controllers"]
+
+
+def test_a_worker_killed_mid_study_loses_no_run_and_counts_none_twice(dask_cluster, fmu_paths, tmp_path):
+    plan = robustness_plan(fmu_paths, 8, ("vud",), 3)  # runs of about a second: a kill lands mid-run
+    killed = []
+
+    def kill_a_worker(row, computed):
+        if computed == 2 and not killed:
+            dask_cluster.kill_worker(dask_cluster.busy_worker())  # the nanny and its worker: a host lost mid-study
+            killed.append(computed)
+
+    outcome = robustness.run_study(plan, tmp_path / "dask", scheduler=dask_cluster.address, batch=1, progress=False,
+                                   on_row=kill_a_worker, plot=False)
+    assert killed and sum(worker.poll() is None for worker in dask_cluster.workers) == 1
+    assert (outcome.computed, outcome.lost, outcome.scheduler_lost) == (8, 0, "")
+    local = robustness.run_study(plan, tmp_path / "local", jobs=2, progress=False, plot=False)
+    assert local.computed == 8
+    assert study_rows(tmp_path / "dask" / "robustness.csv") == study_rows(tmp_path / "local" / "robustness.csv")
