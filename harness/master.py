@@ -293,11 +293,12 @@ class Master:
             plan = self._initialise(plan)
             record = np.empty((steps + 1, len(self.plan_columns)))
             self._before_loop(plan, record)
-            loop_start = clock.perf_counter()
+            loop_start, loop_cpu = clock.perf_counter(), clock.thread_time()
             self._loop(plan, record, progress, progress_every or max(1, count // 200))
             self._check_bound(record, max(0, self.rows_done - DIVERGENCE_CHECK_EVERY - 1), self.rows_done,
                               self.column_bounds)
             self.loop_s = clock.perf_counter() - loop_start
+            self.loop_cpu_s = clock.thread_time() - loop_cpu  # this thread's CPU time in the loop
             if progress is not None:
                 progress(steps, steps)
         except self.RUN_ERRORS as error:

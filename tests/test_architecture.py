@@ -59,13 +59,15 @@ CHAINS = {
     "harness.studies.regression": ("runs", "references", "comparison", "figures", "report", "command"),
     "harness.executors": ("tasks", "local_pool", "dask_pool", "choose", "stream"),
     "harness.studies.sweep": ("grid", "csv_rows", "executors", "heatmap", "run", "command_line"),
+    "harness.studies.robustness": ("distributions", "draws", "plan", "kept_instances", "sample_run", "rows", "spec",
+                                   "statistics", "influence", "figure", "run", "command_line"),
     "harness.hosts": ("trajectory", "console_capture", "plain_fmpy", "host_runners", "host_registry", "matrix_row",
                       "matrix_prose", "matrix_report", "matrix"),
     NATIVE_STAGES: ("targets", "model_exchange", "description", "header", "compiler", "sources", "ls_ref", "package"),
 }
 #: packages whose every module is in their chain (harness/hosts/ holds other hosts' bindings beside its chain)
 WHOLE_CHAINS = ("harness.executors", "harness.studies.tune", "harness.studies.regression", "harness.studies.sweep",
-                NATIVE_STAGES)
+                "harness.studies.robustness", NATIVE_STAGES)
 
 
 @dataclass(frozen=True)

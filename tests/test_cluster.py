@@ -273,7 +273,7 @@ def study_rows(path) -> dict:
     """{(sample, controller): the cells but the wall and loop times}; a run twice is an error."""
     with open(path, newline="") as stream:
         table = list(csv.DictReader(stream))
-    keyed = {(row["sample"], row["controller"]): {k: v for k, v in row.items() if k not in ("wall_s", "loop_s")}
+    keyed = {(row["sample"], row["controller"]): {k: v for k, v in row.items() if k not in ("wall_s", "loop_s", "cpu_s", "loop_cpu_s")}
              for row in table}
     assert len(keyed) == len(table), "a run appears twice"
     return keyed

@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
 #: import names of every package only an extra brings (pytest: this test runs under it, but no command may need it)
 EXTRA_MODULES = ("ecospy", "libcosimpy", "fmu_manipulation_toolbox", "dask", "distributed", "ziglang", "scipy", "lief",
-                 "pytest")
+                 "SALib", "pytest")
 
 
 def names(requirements) -> set:
@@ -38,10 +38,11 @@ def test_the_core_install_is_what_the_main_job_and_the_fmus_need():
     extras = {extra: names(requirements) for extra, requirements in PROJECT["optional-dependencies"].items()}
     assert extras["hosts"] == {"ecospy", "tbb", "libcosimpy", "fmu-manipulation-toolbox"}
     assert extras["native"] == {"ziglang"} and extras["cluster"] == {"dask"}
+    assert extras["robustness"] == {"scipy", "salib"}
     assert {"pytest", "scipy", "lief"} <= extras["test"]
     # the suite runs every study: the test extra brings every other extra (as itself: afc-fmi[hosts,native,cluster])
     test_with = next(r for r in PROJECT["optional-dependencies"]["test"] if r.startswith(PROJECT["name"] + "["))
-    assert {"hosts", "native", "cluster"} <= set(test_with.split("[", 1)[1].rstrip("]").split(","))
+    assert {"hosts", "native", "cluster", "robustness"} <= set(test_with.split("[", 1)[1].rstrip("]").split(","))
 
 
 def uninstalled(tmp_path, packages, *argv, timeout=600) -> subprocess.CompletedProcess:
@@ -90,6 +91,8 @@ def ssp_package(fmu_paths, tmp_path_factory):
      ("tune", "pendulum_case1", "--stop", "0.05", "--trials", "1", "--storage",
       "postgresql+psycopg://afc@127.0.0.1:1/tune", "--out", "{tmp}/tune"), "postgres"),
     ("mutate without pytest", ("pytest",), ("mutate", "--only", "theta_euler_sign"), "test"),
+    ("robustness without SALib", ("SALib",), ("robustness", "pendulum_case1", "--samples", "2", "--param",
+                                              "plant.mp=uniform:0.1:1", "--out", "{tmp}/robustness"), "robustness"),
     ("the native build without zig", ("ziglang",), ("build_fmu.py", "--edition", "native"), "native"),
 ])
 def test_a_command_that_needs_a_missing_extra_says_which_in_one_line(fmu_paths, ssp_package, tmp_path, what, packages,

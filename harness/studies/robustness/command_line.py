@@ -93,6 +93,13 @@ def robustness_command(args) -> int:
     print(f"{outcome.computed} runs computed ({outcome.executor}) in {outcome.wall_s:.1f} s, "
           f"{outcome.done_before} already done" + (", INTERRUPTED: run the same command to resume"
                                                    if outcome.interrupted else ""))
+    speed = outcome.speed()
+    if "wall_ratio" in speed:
+        cpu = (f"; CPU {speed['process_cpu_s']:.1f} s (this process and its workers) against the loops' "
+               f"{speed['loop_cpu_s']:.1f} s: {speed['cpu_ratio']:.2f}x" if "cpu_ratio" in speed else "")
+        print(f"  speed: {speed['runs']} runs, their loops {speed['loop_s']:.1f} s over {speed['slots']} slots: "
+              f"wall time {speed['wall_ratio']:.2f}x the loops'{cpu}; a run's own CPU {speed['run_cpu_ratio']:.2f}x "
+              "its loop's")
     if outcome.summary:
         print("\n".join(summary_lines(outcome.summary)))
     print(f"  rows     {outcome.csv_path}")

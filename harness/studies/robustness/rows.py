@@ -4,7 +4,7 @@ settings in ``DIR/robustness.json``.
 One row per (sample, controller): the sample's index, the controller, the drawn values (and the
 noise seed), every score of docs/model.md section 9 (scores), whether the controller's chatter
 monitor warned, the status (``ok``, ``diverged``, ``failed``) and its reason, the run's wall time
-and its loop's.  Each row is flushed as it is written (a killed command loses only the samples in
+and its loop's, the run's CPU time in its worker and its loop's.  Each row is flushed as it is written (a killed command loses only the samples in
 flight; the operating system has every flushed row), and synced to disk at most every SYNC_S; a
 last line cut short by a kill is dropped when the file is read back.  A rerun with other settings
 is refused (one line), rather than mixed in.
@@ -27,7 +27,7 @@ from ...variants import CONTROLLER_VARIANTS
 CSV_NAME = "robustness.csv"
 SETTINGS_NAME = "robustness.json"
 SYNC_S = 1.0  # rows reach the disk (fsync) at least this often; every row reaches the OS at once (flush)
-TRAILING_COLUMNS = (*SCORE_KEYS, "chatter", "status", "reason", "wall_s", "loop_s")
+TRAILING_COLUMNS = (*SCORE_KEYS, "chatter", "status", "reason", "wall_s", "loop_s", "cpu_s", "loop_cpu_s")
 
 
 def columns(names) -> list:
@@ -44,7 +44,8 @@ def cells(key, values, row: dict) -> list:
     sample, controller = key
     return [str(sample), controller, *(_number(v) for v in values),
             *(_number(row["scores"].get(k)) for k in SCORE_KEYS), str(int(row["chatter"])), row["status"],
-            row["reason"], f"{row['wall_s']:.6f}", _number(row["loop_s"])]
+            row["reason"], f"{row['wall_s']:.6f}", _number(row["loop_s"]), f"{row['cpu_s']:.6f}",
+            _number(row["loop_cpu_s"])]
 
 
 def parse(line: list, names) -> dict | None:
@@ -57,10 +58,11 @@ def parse(line: list, names) -> dict | None:
         values = [float(v) for v in line[2:2 + n]]
         first = 2 + n
         scores = {k: (float(v) if v != "" else math.nan) for k, v in zip(SCORE_KEYS, line[first:first + len(SCORE_KEYS)])}
-        chatter, status, reason, wall, loop = line[first + len(SCORE_KEYS):]
+        chatter, status, reason, wall, loop, cpu, loop_cpu = line[first + len(SCORE_KEYS):]
         row = {"sample": sample, "controller": controller, "values": values, "scores": scores,
                "chatter": int(chatter), "status": status, "reason": reason, "wall_s": float(wall),
-               "loop_s": float(loop) if loop else math.nan}
+               "loop_s": float(loop) if loop else math.nan, "cpu_s": float(cpu),
+               "loop_cpu_s": float(loop_cpu) if loop_cpu else math.nan}
     except ValueError:
         return None
     if controller not in CONTROLLER_VARIANTS or status not in STATUSES:

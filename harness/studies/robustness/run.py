@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import os
+import resource
 import time as clock
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,7 +43,30 @@ class StudyOutcome:
     interrupted: bool = False
     interrupt_status: int = 0
     scheduler_lost: str = ""
-    loop_s: float = 0.0  # the computed runs' loops, summed (the study's speed figure)
+    slots: int = 0  # runs at once (the local pool's processes, the Dask workers' threads)
+    loop_s: float = 0.0  # the computed runs' loops, wall time summed (the study's speed figures)
+    loop_cpu_s: float = 0.0  # their loops' CPU time, summed
+    run_cpu_s: float = 0.0  # the computed runs' CPU time in their workers, summed (the loop and what surrounds it)
+    process_cpu_s: float = math.nan  # the CPU time of this process and of its local workers over the run
+
+    def speed(self) -> dict:
+        """The study's cost against its runs' loops: ``wall_ratio`` = wall time / (loops' wall time / slots),
+        ``cpu_ratio`` = the processes' CPU time / the loops' CPU time (1: nothing but the loops)."""
+        figures = {"runs": self.computed, "slots": self.slots, "wall_s": self.wall_s, "loop_s": self.loop_s,
+                   "loop_cpu_s": self.loop_cpu_s, "run_cpu_s": self.run_cpu_s, "process_cpu_s": self.process_cpu_s}
+        if self.computed and self.loop_s > 0 and self.slots:
+            figures["wall_ratio"] = self.wall_s / (self.loop_s / self.slots)
+        if self.computed and self.loop_cpu_s > 0:
+            figures["run_cpu_ratio"] = self.run_cpu_s / self.loop_cpu_s
+            if math.isfinite(self.process_cpu_s):
+                figures["cpu_ratio"] = self.process_cpu_s / self.loop_cpu_s
+        return figures
+
+
+def _cpu_s() -> float:
+    """The CPU time of this process and of its children that have ended."""
+    mine, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return mine.ru_utime + mine.ru_stime + children.ru_utime + children.ru_stime
 
 
 def row_names(plan: StudyPlan) -> tuple:
@@ -79,13 +104,13 @@ def run_study(plan: StudyPlan, out, jobs: int | None = None, scheduler: str | No
     write_settings(settings_path, settings)
     sink = RowSink(csv_path, names, kept)
     outcome = StudyOutcome(csv_path, None, None, total, done_before, 0, 0.0, "nothing to run")
-    began = clock.perf_counter()
+    began, cpu_before = clock.perf_counter(), _cpu_s()
     executor = None
     try:
         if done_before < total:
             executor = open_executor(jobs, scheduler, files={k: str(v) for k, v in plan.fmu_files.items()},
                                      tasks=-(-(total - done_before) // batch))
-            outcome.executor = executor.describe()
+            outcome.executor, outcome.slots = executor.describe(), executor.slots
         bar = Progress(total, f"robustness {plan.scenario.name}", unit="run", enabled=progress, initial=done_before,
                        dynamic_ncols=True)
         task = functools.partial(run_sample, context_of(plan))
@@ -105,6 +130,8 @@ def run_study(plan: StudyPlan, out, jobs: int | None = None, scheduler: str | No
                     outcome.computed += 1
                     if row["loop_s"] == row["loop_s"]:
                         outcome.loop_s += row["loop_s"]
+                        outcome.loop_cpu_s += row["loop_cpu_s"]
+                    outcome.run_cpu_s += row["cpu_s"]
                     troubled += row["status"] != "ok" or row["chatter"]
                     if troubled:
                         bar.set_postfix(not_ok=troubled, lost=outcome.lost)
@@ -121,6 +148,8 @@ def run_study(plan: StudyPlan, out, jobs: int | None = None, scheduler: str | No
         if executor is not None:
             executor.close(cancel=outcome.interrupted or bool(outcome.scheduler_lost))
     outcome.wall_s = clock.perf_counter() - began
+    if scheduler is None:  # the local pool's workers are reaped when it closes: their CPU time is ours to read
+        outcome.process_cpu_s = _cpu_s() - cpu_before
     rows = current_rows(plan, read_rows(csv_path, names))
     if rows:
         outcome.summary = summarise(plan, rows, spec, scores)

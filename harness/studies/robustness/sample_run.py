@@ -55,12 +55,13 @@ class SampleRunner:
         scenario.components[scenario.controller_instance].parameters["variant"] = CONTROLLER_VARIANTS[controller]
         for (instance, _, parameter), value in zip(self.targets, values):
             scenario.components[instance].parameters[parameter] = value
-        began = clock.perf_counter()
-        row = {"values": values, "status": "ok", "reason": "", "chatter": 0, "scores": {}, "loop_s": float("nan")}
+        began, cpu = clock.perf_counter(), clock.thread_time()
+        row = {"values": values, "status": "ok", "reason": "", "chatter": 0, "scores": {}, "loop_s": float("nan"),
+               "loop_cpu_s": float("nan")}
         try:
             result = self.master.run_scenario(scenario)
             row["scores"] = score_run(result)
-            row["loop_s"] = result.loop_s
+            row["loop_s"], row["loop_cpu_s"] = result.loop_s, self.master.loop_cpu_s
         except SimulationFailed as failure:
             row.update(status=status_of(failure), reason=one_line(failure))
         except Exception as error:  # noqa: BLE001 - a sample that cannot run is a row, the study goes on
@@ -69,7 +70,7 @@ class SampleRunner:
                         if CHATTER_MARK in line), None)
         if chatter is not None:
             row.update(chatter=1, reason=row["reason"] or re.sub(r"^\[\w+\]\s*", "", chatter).split(": over the")[0])
-        row["wall_s"] = clock.perf_counter() - began
+        row["wall_s"], row["cpu_s"] = clock.perf_counter() - began, clock.thread_time() - cpu
         return row
 
     def close(self):
