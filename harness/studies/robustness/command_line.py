@@ -2,6 +2,7 @@
 what it prints (the summary of harness/studies/robustness/statistics.py and influence.py)."""
 from __future__ import annotations
 
+import shutil
 import sys
 from pathlib import Path
 
@@ -18,6 +19,16 @@ from .run import DEFAULT_SCORES, SUMMARY_NAME, run_study
 from .spec import parse_spec
 
 SCIPY_EXTRA = "pip install -e '.[robustness]'"
+DOCS_DIR = Path(__file__).resolve().parents[3] / "docs"  # where --apply copies a study's summary and figure
+
+
+def apply_to_docs(plan, outcome) -> list:
+    """Copy the summary and the figure into docs/ as robustness_SCENARIO.json and robustness_SCENARIO_OBJECTIVE.png."""
+    stem = DOCS_DIR / f"robustness_{plan.scenario.name}"
+    written = [shutil.copyfile(outcome.summary_path, stem.with_suffix(".json"))]
+    if outcome.figure_path:
+        written.append(shutil.copyfile(outcome.figure_path, stem.with_name(f"{stem.name}_{plan.objective}.png")))
+    return [Path(path) for path in written]
 
 
 def _check_extra() -> None:
@@ -107,6 +118,9 @@ def robustness_command(args) -> int:
         print(f"  summary  {outcome.summary_path}")
     if outcome.figure_path:
         print(f"  figure   {outcome.figure_path}")
+    if args.apply and outcome.summary_path and not (outcome.interrupted or outcome.lost or outcome.scheduler_lost):
+        for path in apply_to_docs(plan, outcome):
+            print(f"  applied  {path}")
     if outcome.lost:
         print(f"error: {outcome.lost} run(s) not done, their worker was lost or their task failed "
               f"({outcome.lost_reason}); run the same command to retry them", file=sys.stderr)
@@ -149,6 +163,9 @@ def register(commands):
     study.add_argument("--batch", type=cli_args.positive_int, default=4,
                        help="runs per task (4; more on a Dask cluster: a task's own cost is paid once per batch)")
     study.add_argument("--out", help="output directory (default: build/robustness/SCENARIO, ignored by git)")
+    study.add_argument("--apply", action="store_true",
+                       help="also copy the summary and the figure into docs/ as robustness_SCENARIO.json and "
+                            "robustness_SCENARIO_OBJECTIVE.png (docs/studies.md's example)")
     where = study.add_mutually_exclusive_group()
     where.add_argument("--jobs", type=cli_args.positive_int, help="local worker processes (default: every core)")
     where.add_argument("--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler (tcp://host:8786)")
