@@ -1,13 +1,17 @@
 """The figures of docs/performance.md's section on sweeps over executors (run by hand, not a test):
 
     python -m tests.scaling [--edition python|native] [--points N] [--stop T] [--tasks N] [--no-sweep]
+    python -m tests.scaling --robustness N [--stop T] [--batch B]
 
 The same sweep on a local pool of 1 and of 2 processes and on a Dask cluster of a scheduler and two
 workers started as separate processes (tests/cluster_helpers.py): wall time and parallel efficiency
 (T1 / (2 T2)); then what a task costs each executor beside the work, from tasks that do nothing
 (submission to result, per task, with the pool already started), against one run's cost; and what an item costs through harness/executors/stream.py at one item per task
-and at ten (``--no-sweep``: these figures alone). The load average is printed beside every figure: the
-machine is shared.
+and at ten (``--no-sweep``: these figures alone). ``--robustness N``: the same Monte Carlo study instead
+(harness/studies/robustness/: N samples of docs/examples/pendulum_uncertainty.toml x the three controllers,
+native pendulum_case2 at its validated step) on the same three executors, with the study's own speed
+figures (its wall time against its runs' loops, its processes' CPU time against the loops'). The load
+average is printed beside every figure: the machine is shared.
 """
 from __future__ import annotations
 
@@ -25,7 +29,7 @@ sys.path.insert(0, str(ROOT))
 
 from harness.executors import DaskPool, LocalPool, stream_tasks  # noqa: E402
 from harness.fmu_build import builder as build_fmu  # noqa: E402
-from harness.studies import sweep  # noqa: E402
+from harness.studies import robustness, sweep  # noqa: E402
 from tests.cluster_helpers import DaskCluster  # noqa: E402
 
 
@@ -86,14 +90,59 @@ def streams(executors: dict, count: int) -> None:
               + f" ({load()})", flush=True)
 
 
+def robustness_scaling(samples: int, stop: float | None, batch: int) -> int:
+    """The same Monte Carlo study on 1 and 2 local processes and on the 2-worker Dask cluster."""
+    fmu_paths = build_fmu.ensure_built(edition="native")
+    distributions = robustness.load_file(ROOT / "docs" / "examples" / "pendulum_uncertainty.toml")
+    plan = robustness.plan_study("pendulum_case2", ("vud", "fixed", "fae"), distributions, samples, stop=stop,
+                                 fmu_paths=fmu_paths)
+    steps = plan.scenario.steps
+    print(f"robustness pendulum_case2, {samples} samples x 3 controllers of {plan.scenario.stop:g} s at "
+          f"{plan.scenario.step:g} s ({steps} steps), native edition")
+    walls = {}
+
+    def one(label, **where):
+        out = Path(tempfile.mkdtemp(prefix="afc-scaling-"))
+        try:
+            print(f"  {label:28s} ({load()})", flush=True)
+            outcome = robustness.run_study(plan, out, progress=False, plot=False, **where)
+            assert outcome.computed == 3 * samples and not outcome.lost, outcome
+            speed = outcome.speed()
+            walls[label] = outcome.wall_s
+            cpu = (f", processes' CPU {speed['process_cpu_s']:.1f} s = {speed['cpu_ratio']:.2f}x the loops' "
+                   f"{speed['loop_cpu_s']:.1f} s" if "cpu_ratio" in speed else "")
+            print(f"  {label:28s} {outcome.wall_s:7.2f} s wall = {speed['wall_ratio']:.2f}x (its runs' loops, "
+                  f"{speed['loop_s']:.1f} s, over {speed['slots']}){cpu}; a run's CPU {speed['run_cpu_ratio']:.3f}x "
+                  f"its loop's; a loop {1e6 * speed['loop_cpu_s'] / speed['runs'] / steps:.3f} us CPU per step "
+                  f"({load()})", flush=True)
+        finally:
+            shutil.rmtree(out, ignore_errors=True)
+
+    one("local pool, 1 process", jobs=1, batch=batch)
+    one("local pool, 2 processes", jobs=2, batch=batch)
+    with DaskCluster(2) as cluster:
+        one("Dask, 2 workers (1 thread)", scheduler=cluster.address, batch=max(batch, 16))
+    single = walls["local pool, 1 process"]
+    for name, wall in walls.items():
+        if "1 process" not in name:
+            print(f"  parallel efficiency, {name}: T1 / (2 T) = {single / (2 * wall):.2f}")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--edition", default="python")
     parser.add_argument("--points", type=int, default=16)
-    parser.add_argument("--stop", type=float, default=5.0)
+    parser.add_argument("--stop", type=float, help="stop time of each run (the sweep's default: 5 s; the study's: "
+                                                   "the scenario's)")
     parser.add_argument("--tasks", type=int, default=2000, help="do-nothing tasks per executor")
     parser.add_argument("--no-sweep", action="store_true", help="the stream's figures only")
+    parser.add_argument("--robustness", type=int, metavar="N", help="the Monte Carlo study of N samples instead")
+    parser.add_argument("--batch", type=int, default=4, help="runs per task of --robustness (Dask: at least 16)")
     args = parser.parse_args(argv)
+    if args.robustness:
+        return robustness_scaling(args.robustness, args.stop, args.batch)
+    args.stop = args.stop or 5.0
     if args.no_sweep:
         with DaskCluster(2) as cluster, DaskPool(cluster.address) as dask, LocalPool(2) as local:
             streams({"a local pool of 2": local, "Dask, 2 workers": dask}, args.tasks)
