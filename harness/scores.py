@@ -133,12 +133,13 @@ def score(time, e, de, ym, dym, u, higher=()) -> dict:
     """Every score of docs/model.md section 9 (scores) for one run; ``higher`` = (d2e, ...) for plants of
     order > 2.  A score the run cannot give is None (:func:`why_none` says why)."""
     es1, es2 = steady_state_errors(time, e, de, ym, dym)
+    norm = error_norm(e, de, *higher)  # once for ITAE and IAE: the values itae() and iae() give, bit for bit
     return {
         "ts": settling_time(time, e, ym),
         "es1_pct": es1,
         "es2_pct": es2,
-        "ITAE": itae(time, e, de, *higher),
-        "IAE": iae(time, e, de, *higher),
+        "ITAE": trapezoid(time * norm, time),
+        "IAE": trapezoid(norm, time),
         "Ec": control_energy(time, u),
         "umax": float(np.max(np.abs(u))),
         "tv_u": total_variation_rate(time, u),

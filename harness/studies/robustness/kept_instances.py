@@ -30,8 +30,9 @@ class KeptInstancesMaster(Master):
         self.reused = self.made = 0  # instances reset, instances made (for the study's figures)
 
     def run_scenario(self, scenario, progress=None):
+        """One run; without ``progress``, the whole loop in one call of the compiled loop."""
         self.scenario = scenario
-        return self.run(progress=progress)
+        return self.run(progress=progress, progress_every=0 if progress is not None else max(1, scenario.steps))
 
     def _reusable(self, name: str) -> bool:
         return not self.infos[name].generation_tool.startswith(PYTHONFMU)
