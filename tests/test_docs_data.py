@@ -383,6 +383,53 @@ def _matrix() -> list:
     return [[cell.strip() for cell in row.strip().strip("|").split("|")] for row in rows]
 
 
+def _share(entry) -> str:
+    return f"{100 * entry['share']:.2f} % [{100 * entry['low']:.2f}, {100 * entry['high']:.2f}]"
+
+
+def _estimate(entry) -> str:
+    return f"{entry['value']:.4g} [{entry['low']:.4g}, {entry['high']:.4g}]"
+
+
+def robustness_table(summary: dict) -> list:
+    """The rows docs/studies.md's table of the Monte Carlo example shows, from the study's summary file."""
+    controllers = list(summary["controllers"])
+    rows = [["runs completed"] + [f"{summary['controllers'][c]['ok']} of {summary['controllers'][c]['runs']}"
+                                  for c in controllers]]
+    for name, label in (("diverged", "diverged"), ("chattered", "chattered (the FMU's monitor)"),
+                        ("spec", f"meets {summary['spec']}")):
+        rows.append([label] + [_share(summary["controllers"][c][name]) for c in controllers])
+    for score in ("ITAE", "es1_pct", "umax", "tv_u"):
+        for quantile, label in (("median", "median"), ("q05", "5 %"), ("q95", "95 %")):
+            rows.append([f"{score} {label}"] + [_estimate(summary["controllers"][c]["scores"][score][quantile])
+                                                for c in controllers])
+    rows.append([f"influence on {summary['objective']} (S1)"] + [", ".join(
+        f"{e['name'].split('.')[-1]} {e['S1']:.2f}" for e in summary["influence"][c]["ranking"]) for c in controllers])
+    return rows
+
+
+def test_the_monte_carlo_example_says_what_its_summary_holds():
+    """docs/studies.md's table and paired differences of the robustness example are those of
+    docs/robustness_pendulum_case2.json (its summary, copied there by --apply)."""
+    summary = json.loads(page("docs/robustness_pendulum_case2.json"))
+    text = page("docs/studies.md")
+    shown = {}
+    for heading, header, body in markdown_tables(text):
+        if header.startswith("| 10^4 samples |"):
+            for row in body:
+                cells = [cell.strip() for cell in row.strip().strip("|").split("|")]
+                shown[cells[0]] = cells[1:]
+    assert shown, "docs/studies.md: no table of the Monte Carlo example (header '| 10^4 samples | vud | ...')"
+    expected = robustness_table(summary)
+    assert {row[0]: row[1:] for row in expected} == shown
+    assert summary["samples"] == 10 ** 4
+    flat_text = flat(text)
+    for pair in summary["paired"]:
+        phrase = (f"{pair['a']} - {pair['b']}: median {_estimate(pair['median'])}, {pair['a']} lower in "
+                  f"{_share(pair['a_lower'])} of the samples: {pair['verdict']}")
+        assert phrase in flat_text, f"docs/studies.md: say '{phrase}'"
+
+
 def test_the_host_matrix_figures_quoted_are_those_of_docs_hosts_md():
     matrix = _matrix()
     text = flat(page("docs/other_hosts.md"))

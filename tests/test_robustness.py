@@ -345,3 +345,21 @@ def test_the_command_prints_the_summary_and_resumes(native_paths, tmp_path, caps
     assert cli_main(argv) == 0
     assert "0 runs computed (nothing to run) " in capsys.readouterr().out and \
         len(table(tmp_path / rows_module.CSV_NAME)) == 9
+
+
+def test_on_a_rig_the_noise_seed_is_drawn_per_sample_and_shared_by_the_controllers(native_paths, tmp_path):
+    plan = robustness.plan_study("pendulum_case2_hardware", ("vud", "fae"), [parse_param("plant.mp=uniform:0.1:0.2")],
+                                 3, seed=2, stop=0.2, fmu_paths=native_paths)
+    assert plan.seed_parameter == "sensor.seed"
+    outcome = robustness.run_study(plan, tmp_path, jobs=1, progress=False, plot=False)
+    assert outcome.computed == 6 and not outcome.lost
+    found = table(tmp_path / rows_module.CSV_NAME)
+    seeds = {}
+    for row in found:
+        seeds.setdefault(int(row["sample"]), set()).add(row["sensor.seed"])
+    assert all(len(values) == 1 for values in seeds.values())  # the same noise for every controller
+    assert len({next(iter(values)) for values in seeds.values()}) == 3  # another for every sample
+    assert [int(next(iter(seeds[s]))) for s in range(3)] == [int(v) for v in draws.noise_seeds(2, 3)]
+    with pytest.raises(ScenarioError, match="drawn per sample by the study"):
+        robustness.plan_study("pendulum_case2_hardware", ("vud",), [parse_param("sensor.seed=uniform:1:9")], 3,
+                              fmu_paths=native_paths)
