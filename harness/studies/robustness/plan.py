@@ -104,11 +104,11 @@ def plan_study(scenario_name, controllers, distributions, samples: int, sampler:
     if not 0 <= seed <= 2 ** 32 - 1:
         raise ScenarioError(f"--seed {seed}: valid 0 .. {2 ** 32 - 1}")
     plan = StudyPlan(scenario, controllers, tuple(distributions), sampler, seed, samples, objective, algorithm)
-    for distribution in plan.distributions:
-        check_distribution(plan, distribution, fmu_paths)
     if plan.seed_parameter and plan.seed_parameter in plan.names:
         raise ScenarioError(f"{plan.seed_parameter} is drawn per sample by the study (the noise seed): "
                             "do not give it a distribution")
+    for distribution in plan.distributions:
+        check_distribution(plan, distribution, fmu_paths)
     plan.fmu_files = {name: resolve_fmu(spec.fmu, scenario, fmu_paths).resolve()
                       for name, spec in scenario.components.items()}
     return plan
