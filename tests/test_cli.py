@@ -75,6 +75,10 @@ def _positional_value(action, files) -> str | None:
     raise AssertionError(f"positional {action.dest!r} has no cli_args type: give it one (harness/cli_args.py)")
 
 
+#: a valid value of each option some subcommand requires (sweep --grid, robustness --samples)
+REQUIRED_OPTIONS = {"grid": ["--grid", "plant.mp=0.1"], "samples": ["--samples", "2"]}
+
+
 def base_argv(name, parser, files) -> list:
     """The subcommand with valid positionals and required options."""
     argv = [name]
@@ -84,8 +88,8 @@ def base_argv(name, parser, files) -> list:
             if value is not None:
                 argv.append(value)
         elif action.required:
-            assert action.dest == "grid", f"{name}: required option {action.option_strings} unknown to this test"
-            argv += ["--grid", "plant.mp=0.1"]
+            assert action.dest in REQUIRED_OPTIONS, f"{name}: required option {action.option_strings} unknown to this test"
+            argv += REQUIRED_OPTIONS[action.dest]
     return argv
 
 
