@@ -22,7 +22,7 @@ MODELS = [row.model_identifier for row in fmu_catalog.FMUS]
 NATIVE = [m.model_identifier for m in build_native.models()]
 
 needs_zig = pytest.mark.skipif(not build_native.compiler_available(),
-                               reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                               reason="zig's C compiler is not installed (pip install -e .)")
 
 
 @pytest.fixture(scope="module")

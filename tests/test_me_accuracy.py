@@ -9,7 +9,7 @@ from harness import cli
 from harness.studies import me_accuracy
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
-                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                reason="zig's C compiler is not installed (pip install -e .)")
 
 STOP = 0.5  # s: the manipulator first stops at 0.183 s (vud) and slips again 5 ms later
 

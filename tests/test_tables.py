@@ -124,7 +124,7 @@ def test_figures_define_the_controllers_and_draw_the_settling_band(fmu_paths):
 
 def test_tables_in_model_exchange_decide_the_claims_on_tolerance_ladders(tmp_path, capsys, monkeypatch):
     if not build_native.compiler_available():
-        pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
+        pytest.skip("zig's C compiler is not installed (pip install -e .)")
     code = cli_main(["tables", "--edition", "native", "--algorithm", "me", "--rtol", "1e-8", "--out", str(tmp_path),
                      "--stop", "0.3", "--jobs", "2", "--refine", "0"])
     captured = capsys.readouterr()

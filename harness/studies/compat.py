@@ -511,7 +511,7 @@ def compat(out: Path, editions=EDITIONS, models=None, jobs: int | None = None) -
 def compat_command(args) -> int:
     editions = EDITIONS if args.edition in (None, "all") else (args.edition,)
     if any(e != "python" for e in editions) and not build_native.compiler_available():
-        raise cli_args.UsageError("the native edition needs zig's C compiler: pip install -e '.[native]' "
+        raise cli_args.UsageError("the native edition needs zig's C compiler: pip install -e . "
                                   "(or --edition python)")
     if args.ls_ref_experiments:
         stored = write_ls_ref_experiments(args.fmu)
