@@ -127,47 +127,6 @@ void model_construct(ModelInstance *m) {
     for (int j = 0; j < rules; j++) state->xi[j] = 1.0 / rules;
 }
 
-/* cross_parameter_errors: the rule count within the table's rule weights and, for the
- * general controller, k Hurwitz (a positive definite P of (30)) */
-int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
-    int n = order_of(m), sets = sets_of(m);
-    if (n < 1 || n > SUPPORTED_ORDER || N_k < n || N_q < n || N_kappa < n || N_E < n) {
-        snprintf(message, size, "parameter order = %d is invalid; valid range: 1 .. %d", n, SUPPORTED_ORDER);
-        return MODEL_ERROR;
-    }
-    if (rules_of(n, sets) > N_theta) {
-        snprintf(message, size, "parameters order = %d, sets = %d give m^n = %d rules, above the bound %d; "
-                 "valid: sets^order <= %d (every sets 2..5 up to order 3, sets <= 3 at order 4)",
-                 n, sets, rules_of(n, sets), N_theta, N_theta);
-        return MODEL_ERROR;
-    }
-#ifdef VR_order
-    double k[MAX_ORDER], q[MAX_ORDER], p[MAX_ORDER][MAX_ORDER];
-    for (int i = 0; i < n; i++) {
-        k[i] = m->s->values[VRS_k[i]];
-        q[i] = m->s->values[VRS_q[i]];
-    }
-    if (lyapunov_p(n, k, q, p) != 0 || !is_positive_definite(n, (const double (*)[MAX_ORDER])p)) {
-        /* k as a tuple, the polynomial s^n + k1 s^(n-1) + ... + kn */
-        char tuple[256], polynomial[512];
-        int written = snprintf(polynomial, sizeof polynomial, "s^%d", n);
-        for (int i = 0; i < n && written >= 0 && (size_t)written < sizeof polynomial; i++) {
-            if (n - 1 - i)
-                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %.17g s^%d", k[i],
-                                    n - 1 - i);
-            else
-                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %.17g", k[i]);
-        }
-        snprintf(message, size, "parameters k1..k%d = %s are invalid for order = %d: %s is not Hurwitz (no "
-                 "positive definite P in (30)); valid: k with every root of the polynomial in the left "
-                 "half-plane, e.g. the coefficients of (s + 1)^%d", n, numbers_text(tuple, sizeof tuple, k, n, "()"),
-                 n, polynomial, n);
-        return MODEL_ERROR;
-    }
-#endif
-    return MODEL_OK;
-}
-
 /* ---- the robust cures (docs/model.md section 14 (robust cures)): each off at 0, kept in these functions.
  * A table without their rows (an older declaration) gives 0: the paper's controller. */
 #ifdef VR_alpha_min
@@ -208,12 +167,57 @@ static void leaky_step(ModelInstance *m, double tau, double step_size, const dou
 }
 
 /* Model Exchange refuses the measurement filter (F1): its state would be a continuous state the
- * declaration does not have; a host filters e, de in its own blocks (or the Sensor's filter) */
-static int refuse_filter_in_model_exchange(ModelInstance *m) {
-    if (m->model_exchange && CURE(m, filter_time_constant) > 0.0)
-        return fmu_fail(m, "parameter filter_time_constant = %.17g is invalid in Model Exchange; valid there: 0 (the "
-                        "measurement filter (F1) is co-simulation only: filter e, de in the host, or with the "
-                        "Sensor's filter_time_constant)", CURE(m, filter_time_constant));
+ * declaration does not have; a host filters e, de in its own blocks (or the Sensor's filter).
+ * A cross-parameter rule, so that in initialisation mode the outputs keep their start values */
+static int filter_in_model_exchange_error(ModelInstance *m, char *message, size_t size) {
+    if (m->model_exchange && CURE(m, filter_time_constant) > 0.0) {
+        snprintf(message, size, "parameter filter_time_constant = %.17g is invalid in Model Exchange; valid there: 0 "
+                 "(the measurement filter (F1) is co-simulation only: filter e, de in the host, or with the Sensor's "
+                 "filter_time_constant)", CURE(m, filter_time_constant));
+        return MODEL_ERROR;
+    }
+    return MODEL_OK;
+}
+
+/* cross_parameter_errors: the rule count within the table's rule weights and, for the
+ * general controller, k Hurwitz (a positive definite P of (30)) */
+int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
+    int n = order_of(m), sets = sets_of(m);
+    if (n < 1 || n > SUPPORTED_ORDER || N_k < n || N_q < n || N_kappa < n || N_E < n) {
+        snprintf(message, size, "parameter order = %d is invalid; valid range: 1 .. %d", n, SUPPORTED_ORDER);
+        return MODEL_ERROR;
+    }
+    if (rules_of(n, sets) > N_theta) {
+        snprintf(message, size, "parameters order = %d, sets = %d give m^n = %d rules, above the bound %d; "
+                 "valid: sets^order <= %d (every sets 2..5 up to order 3, sets <= 3 at order 4)",
+                 n, sets, rules_of(n, sets), N_theta, N_theta);
+        return MODEL_ERROR;
+    }
+    if (filter_in_model_exchange_error(m, message, size) != MODEL_OK) return MODEL_ERROR;
+#ifdef VR_order
+    double k[MAX_ORDER], q[MAX_ORDER], p[MAX_ORDER][MAX_ORDER];
+    for (int i = 0; i < n; i++) {
+        k[i] = m->s->values[VRS_k[i]];
+        q[i] = m->s->values[VRS_q[i]];
+    }
+    if (lyapunov_p(n, k, q, p) != 0 || !is_positive_definite(n, (const double (*)[MAX_ORDER])p)) {
+        /* k as a tuple, the polynomial s^n + k1 s^(n-1) + ... + kn */
+        char tuple[256], polynomial[512];
+        int written = snprintf(polynomial, sizeof polynomial, "s^%d", n);
+        for (int i = 0; i < n && written >= 0 && (size_t)written < sizeof polynomial; i++) {
+            if (n - 1 - i)
+                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %.17g s^%d", k[i],
+                                    n - 1 - i);
+            else
+                written += snprintf(polynomial + written, sizeof polynomial - (size_t)written, " + %.17g", k[i]);
+        }
+        snprintf(message, size, "parameters k1..k%d = %s are invalid for order = %d: %s is not Hurwitz (no "
+                 "positive definite P in (30)); valid: k with every root of the polynomial in the left "
+                 "half-plane, e.g. the coefficients of (s + 1)^%d", n, numbers_text(tuple, sizeof tuple, k, n, "()"),
+                 n, polynomial, n);
+        return MODEL_ERROR;
+    }
+#endif
     return MODEL_OK;
 }
 
@@ -265,7 +269,6 @@ int model_initialize(ModelInstance *m, double start_time) {
     if (configure(m) != 0)
         return fmu_fail(m, "the Lyapunov equation (30) has no solution for these k: "
                         "s^n + k1 s^(n-1) + ... + kn must be Hurwitz");
-    if (refuse_filter_in_model_exchange(m) != MODEL_OK) return MODEL_ERROR;
     state->filter[FILTER_STARTED] = 0.0; /* not started: the first sample passes (F1) */
 #if HOST_ROBUST
     if ((int)V(m, initial_error) == INITIAL_ERROR_PINNED) {
@@ -413,6 +416,12 @@ int model_set_continuous_states(ModelInstance *m, const double x[]) {
  * error E and the basis xi of the outputs (controller_output [9]), as a doStep takes them */
 int model_get_derivatives(ModelInstance *m, double dx[]) {
     ControllerState *state = STATE(m);
+    if (m->outputs_stale && m->s->initialized == 0.0) {
+        /* initialisation mode with invalid parameters (the outputs keep their start values, and so do
+         * the derivatives: 0); exitInitializationMode reports the parameter */
+        for (int j = 0; j < N_STATES; j++) dx[j] = 0.0;
+        return MODEL_OK;
+    }
     if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return MODEL_ERROR;
     const double *values = m->s->values;
     const ControllerParameters *p = &state->p;

@@ -16,7 +16,11 @@ Co-simulation semantics:
   placeholders at initialisation (``initial_error_latch``,
   docs/host_robustness.md), or from parameters.
 * The controller watches its own u for chatter (``chatter_monitor``) and
-  warns once, naming the step and the remedy.
+  warns once, naming the step and the remedies.
+* The robust cures (docs/model.md section 14 (robust cures)), each off at 0: a floor
+  alpha_min on alpha (in ``afc_math.controller_output``), a dead zone and sigma-modification
+  in the adaptive law (``step``), a first-order filter on the error inputs
+  (``compute_outputs``, committed in ``step``).
 * order n and sets m (Integer parameters, appended to the table) make it the
   controller of an nth-order plant with m fuzzy sets per input: wire e, de,
   ..., e^(n-1) (and ym, ..., ym^(n-1) for fls_input = 2); M = m^n rule
