@@ -39,7 +39,7 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys, mo
     assert len(verdicts) == 8, verdicts  # every claim has exactly one verdict...
     assert set(verdicts) <= {"reproduced", "not reproduced", "not decided at this accuracy"}, verdicts
     assert report.count(" ± ") >= 5 * 3  # ...stated with the numbers and their errors
-    assert "(h = 0.0002 s" in report and "(h = 2.5e-05 s" in report  # decided on the h/2 runs
+    assert "(h = 0.00025 s, plant step 0.000125 s" in report and "(h = 2.5e-05 s, plant step 3.13e-06 s" in report
     assert "(h = 0.0004 s" not in report and "(h = 0.0001 s" not in report
     for name in ("pendulum_case1", "pendulum_case2", "pendulum_case3", "manipulator"):
         assert (tmp_path / f"{name}.png").stat().st_size > 10_000
@@ -65,16 +65,22 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys, mo
         assert " ± " not in claim and f"no {metric}_pct (vud, fixed, fae: the horizon 0.3 s is shorter" in claim, claim
     assert "es1 and es2 are n/a in every table and their claims are not decided" in captured.err
     # stderr is not a terminal here (as under `| cat` or in a CI log): progress lines, not silence
-    assert "Table I/II at h and h/2, third-order plant: 1/30 runs done in " in captured.err, captured.err
-    assert re.search(r"Table I/II at h and h/2, third-order plant: 30/30 runs done in \d+ s\n", captured.err)
+    words = "Table I/II at h, h/2 and h with half the plant step, third-order plant"
+    assert f"{words}: 1/42 runs done in " in captured.err, captured.err
+    assert re.search(rf"{re.escape(words)}: 42/42 runs done in \d+ s\n", captured.err)
     # the first line counts every run the progress lines count, with the steps of each run's horizon and step
-    first = re.fullmatch(r"30 runs: 30 in one pool in [\d.]+ s \(the 12 cases of Tables I/II at h and h/2, 6 of the "
-                         r"third-order plant\), 0 finer for open claims in [\d.]+ s; (\d+) communication steps, "
-                         r"[\d.]+ s wall on 2 processes; peak memory \d+ MiB \(largest process\)", out.splitlines()[0])
+    first = re.fullmatch(r"42 runs: 42 in one pool in [\d.]+ s \(the 12 cases of Tables I/II at h, h/2 and h with "
+                         r"half the plant step, 6 of the third-order plant\), 0 finer for open claims in [\d.]+ s; "
+                         r"(\d+) communication steps, (\d+) plant RK4 steps, [\d.]+ s wall on 2 processes; peak "
+                         r"memory \d+ MiB \(largest process\)", out.splitlines()[0])
     assert first, out.splitlines()[0]
     paper = [row for name in ("table1.csv", "table2.csv") for row in csv.DictReader(open(tmp_path / name))]
-    assert int(first.group(1)) == sum(3 * round(0.3 / float(r["step"])) for r in paper) + \
-        sum(round(0.3 / float(r["step"])) for r in beyond)  # h and h/2 of each paper case, the third-order runs
+    # h, h/2 (twice the steps) and h with half the plant step of each paper case, the third-order runs
+    assert int(first.group(1)) == sum(4 * round(0.3 / float(r["step"])) for r in paper) + \
+        sum(round(0.3 / float(r["step"])) for r in beyond)
+    internal = {"pendulum_case1": 2.5e-4, "pendulum_case2": 4e-4, "pendulum_case3": 4e-4, "manipulator": 6.25e-6}
+    assert int(first.group(2)) == sum(round(0.3 / internal[r["scenario"]]) * (1 + 2 + 2) for r in paper) + \
+        sum(round(0.3 / 6.25e-5) for r in beyond)  # at h the plant's step, at h/2 and at h half of it
     # the report read by a control engineer
     for definition in ("- `vud` (variant 1): proposed AFC (variable universes)",
                        "- `fixed` (variant 2): stand-in for [46] (fixed universes)",
@@ -91,7 +97,8 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys, mo
     assert "| Ec ((N.m)2.s) | umax (N.m) | TV(u)/s (N.m/s) |" in report and "| Ec (V2.s) | umax (V) |" in report
     assert report.count("The claims below read the same scores at the finest step run (h/2 or finer) with their "
                         "numerical error") == 4
-    assert "At the scenario's step h = 0.0005 s." in report and "At the scenario's step h = 5e-05 s." in report
+    assert "At the scenario's step h = 0.0005 s, the plant's RK4 in internal steps of 0.00025 s." in report
+    assert "At the scenario's step h = 5e-05 s, the plant's RK4 in internal steps of 6.25e-06 s." in report
     assert "The paper's Tables I and II are not in the text of the paper we have" in report
     assert "one decided by a gap under 1 % of the values says *close*" in report
     for number, name in enumerate(("pendulum_case1", "pendulum_case2", "pendulum_case3", "manipulator"), 1):

@@ -3,8 +3,10 @@
 ``python -m harness tables [--out DIR] [--jobs N]`` runs the 12 co-simulations
 (4 scenarios x vud, fixed, fae) in parallel processes and writes table1.csv,
 table2.csv, report.md and figures like the paper's Figs. 4-8 to DIR.  It also
-runs each case at half its step (and, with ``--refine``, the cases an open claim
-needs finer still): harness/studies/claims.py decides the paper's claims on those ladders.
+runs each case at half its step (the plant's internal step halved with it) and at its
+step with half the plant's internal step (and, with ``--refine``, the cases an open
+claim needs finer still; harness/studies/ladders.py): harness/studies/claims.py
+decides the paper's claims on those ladders.
 Beyond the paper, it runs the third-order plant (motor_arm x vud, fixed, fae x
 m = 2, 3 fuzzy sets) into table3_beyond_paper.csv and a section of report.md.
 The step study behind each scenario's step is harness/studies/step_study.py.
@@ -28,6 +30,7 @@ from ..me_master import DEFAULT_RTOL
 from ..scores import DEFINITIONS, SCORE_KEYS, SETTLING_BAND, undefined_reason, value_text, why_none
 from ..units import score_units, variable_unit, with_unit
 from . import claims as claims_module
+from .ladders import case_cost, finer_case, ladder_cases, ladder_row
 from .step_study import convergence_summary, load_convergence, validated_step
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -111,7 +114,10 @@ def step_note(rows: list, scenario: str) -> str:
         return (f"Model Exchange at rtol {tolerances}, on the output grid h = {step} s. The claims below read the "
                 "same scores at the tightest rtol run with their numerical error, so their values differ from "
                 "these in the digits that error covers.")
-    return (f"At the scenario's step h = {step} s. The claims below read the same scores at the finest step "
+    internal = sorted({row["plant_step"] for row in own if row.get("plant_step")})
+    plant = (f", the plant's RK4 in internal steps of {', '.join(f'{h:.3g}' for h in internal)} s" if internal
+             else "")
+    return (f"At the scenario's step h = {step} s{plant}. The claims below read the same scores at the finest step "
             "run (h/2 or finer) with their numerical error, so their values differ from these in the digits "
             "that error covers.")
 
@@ -228,11 +234,16 @@ def peak_memory_mib() -> float:
 
 
 CLAIMS_METHOD = (
-    "Each claim is decided on step ladders: every case also runs at half the scenario's step, and a "
-    "case that an open claim needs at a further half (`--refine`). A score is its value at the finest "
-    "step run, ± its numerical error: the change of that score over the last halving (the loop is "
-    "first order in the step). A comparison is decided only when the gap exceeds the sum of both "
-    "errors; otherwise it is *not decided at this accuracy*; one decided by a gap under "
+    "Each claim is decided on ladders that refine what the error depends on: every case also runs at half the "
+    "scenario's step h (the plant's internal RK4 step halved with it) and at h with half the plant's internal "
+    "step, and a case that an open claim needs at a further half (`--refine`). A score is its value at the "
+    "finest step run, ± an estimate of its distance to the continuous-time value of the model: "
+    f"{claims_module.SAFETY_FACTOR:g} x (the change of that score over the last halving of the step + "
+    f"{claims_module.PLANT_ORDER_FACTOR:g} x its change when the plant's step is halved) (the loop is first order "
+    "in the step, the plant's RK4 first order where the Coulomb friction switches; docs/verification.md). A "
+    "ladder of three or more halvings whose last change is not the smallest shows no convergence: its error is "
+    "unknown and its comparisons are *undecided at this step*. A comparison is decided only when the gap exceeds "
+    "the sum of both errors; otherwise it is *not decided at this accuracy*; one decided by a gap under "
     f"{100 * claims_module.CLOSE_MARGIN:g} % of the values says *close*. The tables above are at the scenario's "
     "step, so their digits differ from the values here where the numerical error reaches them.")
 PAPER_VALUES = (
@@ -352,27 +363,6 @@ CLAIMS_METHOD_ME = (
     "both errors; otherwise it is *not decided at this accuracy*.")
 
 
-def half_step_case(case: Case) -> Case:
-    """The same case at half its step (no figure signals): the error estimate of the claims; for Model Exchange
-    the same case at a TOLERANCE_FACTOR looser rtol."""
-    if case.algorithm == MODEL_EXCHANGE:
-        return Case(case.scenario, case.controller, stop=case.stop, algorithm=MODEL_EXCHANGE,
-                    rtol=case.rtol * claims_module.TOLERANCE_FACTOR)
-    return Case(case.scenario, case.controller, step=case.build().step / 2, stop=case.stop)
-
-
-def case_cost(case: Case) -> int:
-    return case.build().steps
-
-
-def finer_case(name: str, controller: str, ladder: list, stop: float | None) -> Case:
-    """The next rung of a case's ladder: half its finest step, or (Model Exchange) a tighter rtol."""
-    if all(o.get("rtol") for o in ladder):
-        return Case(name, controller, stop=stop, algorithm=MODEL_EXCHANGE,
-                    rtol=min(o["rtol"] for o in ladder) / claims_module.TOLERANCE_FACTOR)
-    return Case(name, controller, step=min(o["step"] for o in ladder) / 2, stop=stop)
-
-
 def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int) -> tuple[list, list]:
     """(claims, refined cases): up to ``levels`` further halvings of the step (tighter tolerances for
     Model Exchange) for the cases a claim still open needs (``ladders`` gains their runs)."""
@@ -382,19 +372,20 @@ def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int
         open_cases = claims_module.undecided_cases(claims)
         if not open_cases:
             break
-        finer = [finer_case(name, controller, ladders[(name, controller)], stop)
-                 for name, controller in sorted(open_cases)]
-        for outcome in run_cases(sorted(finer, key=case_cost, reverse=True), jobs=jobs,
-                                 description="claims: finer steps"):
-            ladders[(outcome["scenario"], outcome["controller"])].append(outcome)
+        finer = sorted((finer_case(name, controller, ladders[(name, controller)], stop)
+                        for name, controller in sorted(open_cases)), key=case_cost, reverse=True)
+        for case, outcome in zip(finer, run_cases(finer, jobs=jobs, description="claims: finer steps")):
+            ladders[(outcome["scenario"], outcome["controller"])].append(ladder_row(case, outcome))
             refined.append((outcome["scenario"], outcome["controller"], outcome.get("rtol") or outcome["step"]))
         claims = claims_module.claims_check(ladders)
     return claims, refined
 
 
 def ladder_words(model_exchange: bool) -> str:
-    """How the claims' ladders begin: each case at h and h/2, or (Model Exchange) at rtol and a looser one."""
-    return (f"at rtol and {claims_module.TOLERANCE_FACTOR:g} rtol" if model_exchange else "at h and h/2")
+    """How the claims' ladders begin: each case at h, at h/2 and at h with half the plant's internal step, or
+    (Model Exchange) at rtol and a looser one."""
+    return (f"at rtol and {claims_module.TOLERANCE_FACTOR:g} rtol" if model_exchange
+            else "at h, h/2 and h with half the plant step")
 
 
 def communication_steps(outcomes) -> int:
@@ -402,12 +393,18 @@ def communication_steps(outcomes) -> int:
     return sum(round((o["stop"] - o["start"]) / o["step"]) for o in outcomes)
 
 
+def plant_steps(rows) -> int:
+    """The plants' internal RK4 steps of co-simulation ladder rows (each with its ``plant_step``)."""
+    return sum(round((o["stop"] - o["start"]) / o["plant_step"]) for o in rows if o.get("plant_step"))
+
+
 def run_summary(paper_cases: int, pooled: int, beyond: int, refined: int, pool_s: float, wall_s: float, jobs: int,
-                peak_mib: float, steps: int | None, model_exchange: bool) -> str:
+                peak_mib: float, steps: int | None, model_exchange: bool, internal: int | None = None) -> str:
     """The command's first line: every run it made, by kind, with its wall time (README.md quotes the counts)."""
     return (f"{pooled + refined} runs: {pooled} in one pool in {pool_s:.1f} s (the {paper_cases} cases of Tables I/II "
             f"{ladder_words(model_exchange)}, {beyond} of the third-order plant), {refined} finer for open claims in "
             f"{wall_s - pool_s:.1f} s; " + (f"{steps} communication steps, " if steps is not None else "")
+            + (f"{internal} plant RK4 steps, " if internal else "")
             + f"{wall_s:.1f} s wall on {jobs} processes; peak memory {peak_mib:.0f} MiB (largest process)")
 
 
@@ -429,17 +426,17 @@ def tables_command(args) -> int:
     rtol = (args.rtol or DEFAULT_RTOL) if me else None
     cases = [Case(name, controller, stop=args.stop, figure_interval=0.01, algorithm=args.algorithm, rtol=rtol)
              for name in ALL_SCENARIOS for controller in CONTROLLERS]
-    # every case at h (the tables) and at h/2 (the claims' error estimates) in one pool,
-    # the longest runs first, so both cores finish together
+    # every case at h (the tables), at h/2 and at h with half the plant's internal step (the claims' error
+    # estimates) in one pool, the longest runs first, so both cores finish together
     extra = beyond_paper_cases(args.stop, args.algorithm, rtol)  # the third-order plant, beyond the paper (no claims)
-    runs = sorted([*cases, *map(half_step_case, cases)], key=case_cost, reverse=True)
+    runs = sorted([*cases, *(c for case in cases for c in ladder_cases(case))], key=case_cost, reverse=True)
     started = clock.perf_counter()
     everything = sorted([*runs, *extra], key=case_cost, reverse=True)
     outcomes = dict(zip(everything, run_cases(everything, jobs=jobs,
                                               description=f"Table I/II {ladder_words(me)}, third-order plant")))
-    rows = [outcomes[case] for case in cases]
+    rows = [ladder_row(case, outcomes[case]) for case in cases]
     beyond_rows = [dict(outcomes[case], sets=dict(case.overrides)["controller.sets"]) for case in extra]
-    ladders = claims_module.ladders_from_rows([outcomes[case] for case in runs])
+    ladders = claims_module.ladders_from_rows([ladder_row(case, outcomes[case]) for case in runs])
     ladder_s = clock.perf_counter() - started
     claims, refined = refine_open_claims(ladders, args.stop, jobs, args.refine)
     wall_s = clock.perf_counter() - started
@@ -463,9 +460,9 @@ def tables_command(args) -> int:
     figure_paths = figures(rows, out)
     (out / "report.md").write_text(report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib,
                                                    beyond_rows, rtol))
+    counted = [*(o for ladder in ladders.values() for o in ladder), *(ladder_row(c, outcomes[c]) for c in extra)]
     print(run_summary(len(cases), len(everything), len(extra), len(refined), ladder_s, wall_s, jobs, peak_mib,
-                      None if me else communication_steps([*(o for ladder in ladders.values() for o in ladder),
-                                                            *(outcomes[case] for case in extra)]), me))
+                      None if me else communication_steps(counted), me, None if me else plant_steps(counted)))
     for name in ALL_SCENARIOS:
         print(f"\n{name}\n{paper_table(rows, name)}")
     print(f"\n{BEYOND_PAPER} (beyond the paper)\n{beyond_paper_table(beyond_rows)}")
