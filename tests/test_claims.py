@@ -51,8 +51,12 @@ def test_an_estimate_is_the_finest_value_with_the_changes_of_both_axes():
             outcome("s", "vud", 4e-4, 2e-4, Ec=418.230)]  # any order
     found = claims.estimate(rows[::-1], "Ec")
     assert found.value == 418.222 and found.step == 2e-4 and found.plant_step == 2e-4
-    assert found.error == pytest.approx(claims.SAFETY_FACTOR * (0.012 + claims.PLANT_ORDER_FACTOR * 0.004))
-    assert claims.SAFETY_FACTOR == 1.25 and claims.PLANT_ORDER_FACTOR == 2.0
+    assert found.error == pytest.approx(claims.SAFETY_FACTOR * (0.012 + 2 * 0.004))  # first order: 2 x to h_p / 2
+    assert claims.SAFETY_FACTOR == 1.25
+    coarser = [outcome("s", "vud", 4e-4, 1e-4, Ec=418.234), outcome("s", "vud", 2e-4, 5e-5, Ec=418.222),
+               outcome("s", "vud", 4e-4, 2e-4, Ec=418.242)]  # h holds four plant steps: the axis runs 2 h_p
+    found = claims.estimate(coarser, "Ec")
+    assert found.plant_step == 5e-5 and found.error == pytest.approx(1.25 * (0.012 + 0.008))  # the change itself
 
 
 def test_the_plant_axis_sees_what_halving_the_step_with_the_plant_step_cannot():
@@ -84,7 +88,7 @@ def test_an_estimate_without_its_rungs_has_an_infinite_error_and_a_failed_run_no
     assert claims.estimate([outcome("s", "vud", 8e-4, Ec=1.0), outcome("s", "vud", 2e-4, Ec=1.0)],
                            "Ec").error == math.inf  # no plant-axis run
     no_plant = claims.estimate([outcome("s", "vud", 4e-4, Ec=1.0), outcome("s", "vud", 2e-4, Ec=1.0)], "Ec")
-    assert no_plant.error == math.inf and no_plant.note == "no run with a finer plant step"
+    assert no_plant.error == math.inf and no_plant.note == "no run at another plant step"
     failed = [outcome("s", "vud", 4e-4, Ec=1.0), {"scenario": "s", "controller": "vud", "step": 2e-4,
                                                   "status": "diverged"}]
     assert claims.estimate(failed, "Ec") is None
@@ -312,15 +316,16 @@ def test_a_score_the_horizon_does_not_define_decides_nothing_and_asks_no_finer_r
 @pytest.mark.parametrize("name, step, internal", [("manipulator", 5e-5, 6.25e-6), ("pendulum_case1", 5e-4, 2.5e-4),
                                                   ("pendulum_case3", 4e-4, 4e-4)])
 def test_the_ladder_halves_the_step_with_the_plant_step_and_the_plant_step_alone(name, step, internal):
-    """The communication axis keeps h_p / h (the manipulator's chatter is set by it), the plant axis halves h_p at
-    h; each run's row says its plant step; a finer rung halves both again."""
+    """The communication axis keeps h_p / h (the manipulator's chatter is set by it), the plant axis doubles h_p at
+    h (halves it where h holds one plant step); each run's row says its plant step; a finer rung halves both."""
     from harness.cases import Case
     from harness.studies import ladders as ladder_runs
 
     case = Case(name, "vud", figure_interval=0.01)
     assert ladder_runs.plant_step(case.build()) == pytest.approx(internal, rel=1e-12)
     half, plant = ladder_runs.ladder_cases(case)
-    for run, expected in ((half, (step / 2, internal / 2)), (plant, (step, internal / 2))):
+    other = 2 * internal if step >= 2 * internal else internal / 2  # the cheaper run where h holds two
+    for run, expected in ((half, (step / 2, internal / 2)), (plant, (step, other))):
         built = run.build()
         assert (built.step, ladder_runs.plant_step(built)) == pytest.approx(expected, rel=1e-12), run.label
         assert run.figure_interval is None and run.controller == "vud"

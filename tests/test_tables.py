@@ -65,22 +65,23 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys, mo
         assert " ± " not in claim and f"no {metric}_pct (vud, fixed, fae: the horizon 0.3 s is shorter" in claim, claim
     assert "es1 and es2 are n/a in every table and their claims are not decided" in captured.err
     # stderr is not a terminal here (as under `| cat` or in a CI log): progress lines, not silence
-    words = "Table I/II at h, h/2 and h with half the plant step, third-order plant"
+    words = "Table I/II at h, h/2 and h with another plant step, third-order plant"
     assert f"{words}: 1/42 runs done in " in captured.err, captured.err
     assert re.search(rf"{re.escape(words)}: 42/42 runs done in \d+ s\n", captured.err)
     # the first line counts every run the progress lines count, with the steps of each run's horizon and step
     first = re.fullmatch(r"42 runs: 42 in one pool in [\d.]+ s \(the 12 cases of Tables I/II at h, h/2 and h with "
-                         r"half the plant step, 6 of the third-order plant\), 0 finer for open claims in [\d.]+ s; "
+                         r"another plant step, 6 of the third-order plant\), 0 finer for open claims in [\d.]+ s; "
                          r"(\d+) communication steps, (\d+) plant RK4 steps, [\d.]+ s wall on 2 processes; peak "
                          r"memory \d+ MiB \(largest process\)", out.splitlines()[0])
     assert first, out.splitlines()[0]
     paper = [row for name in ("table1.csv", "table2.csv") for row in csv.DictReader(open(tmp_path / name))]
-    # h, h/2 (twice the steps) and h with half the plant step of each paper case, the third-order runs
+    # h, h/2 (twice the steps) and h with another plant step of each paper case, the third-order runs
     assert int(first.group(1)) == sum(4 * round(0.3 / float(r["step"])) for r in paper) + \
         sum(round(0.3 / float(r["step"])) for r in beyond)
     internal = {"pendulum_case1": 2.5e-4, "pendulum_case2": 4e-4, "pendulum_case3": 4e-4, "manipulator": 6.25e-6}
-    assert int(first.group(2)) == sum(round(0.3 / internal[r["scenario"]]) * (1 + 2 + 2) for r in paper) + \
-        sum(round(0.3 / 6.25e-5) for r in beyond)  # at h the plant's step, at h/2 and at h half of it
+    plant_axis = {"pendulum_case1": 0.5, "pendulum_case2": 2, "pendulum_case3": 2, "manipulator": 0.5}  # 2 h_p or h_p/2
+    assert int(first.group(2)) == sum(round(0.3 / internal[r["scenario"]] * (1 + 2 + plant_axis[r["scenario"]]))
+                                      for r in paper) + sum(round(0.3 / 6.25e-5) for r in beyond)
     # the report read by a control engineer
     for definition in ("- `vud` (variant 1): proposed AFC (variable universes)",
                        "- `fixed` (variant 2): stand-in for [46] (fixed universes)",

@@ -13,15 +13,18 @@ Every score comes from a ladder of runs of the same case that refines what its e
 A score's value is the one at the finest communication step run and its numerical error, an
 estimate of its distance to the continuous-time value of the model, is
 
-    SAFETY_FACTOR x (communication change + PLANT_ORDER_FACTOR x plant change)
+    SAFETY_FACTOR x (communication change + plant error)
 
 * the communication change: ``|s(h') - s(h'/2)|`` over the last halving (the sampled-data loop is first
   order in the step: u held, theta by explicit Euler, so the change estimates the error left in the
   finer value); with three or more halvings the ladder must show convergence (the last change smaller
   than the one before, the error then scaled by their ratio q as ``q / (1 - q)`` when q > 1/2),
   otherwise the error is infinite: *undecided at this step*;
-* the plant change: ``|s(h, h_p) - s(h, h_p / 2)|``; the value's plant step is h_p / h of its step, the
-  coarser of the two, and a first-order integration leaves twice the change of one halving there;
+* the plant error: the value's plant step is the table run's h_p / h (the communication axis keeps it), and
+  the plant axis runs the case at h with another plant step h_p' (2 h_p where h holds two plant steps or
+  more, else h_p / 2): a first-order integration leaves ``|s(h, h_p) - s(h, h_p')| h_p / |h_p' - h_p|`` at
+  h_p (the change itself from 2 h_p, twice the change to h_p / 2; RK4 is fourth order on a smooth plant,
+  first order where the Coulomb friction switches, so this bounds it);
 * SAFETY_FACTOR: the factor of safety of Roache's grid convergence index for a ladder of a known order.
 
 ``ts`` is quantised to the communication grid: its error is at least the step of its run, and its
@@ -70,8 +73,6 @@ SMOOTHNESS_TOLERANCE = 1.10  # "smooth": tv_u at most 10 % above the smoothest c
 GRID_QUANTISED = ("ts",)  # scores read off the communication grid: error at least one step
 #: the factor of safety of Roache's grid convergence index for a ladder of a known order (first)
 SAFETY_FACTOR = 1.25
-#: the error a first-order integration leaves at a plant step is twice the change from halving it
-PLANT_ORDER_FACTOR = 2.0
 #: relative slack when matching steps and plant-step ratios of the runs of one ladder
 STEP_MATCH = 1e-6
 TOLERANCE_FACTOR = 10.0  # --algorithm me: the ladder's rungs are rtol and 10 rtol (no step to halve)
@@ -173,7 +174,12 @@ def estimate(ladder: list, metric: str) -> Estimate | None:
     if all(o.get("rtol") for o in ladder):  # a Model Exchange ladder (--algorithm me)
         return _tolerance_estimate(ladder, metric)
     runs = sorted(ladder, key=lambda o: (-o["step"], -(o.get("plant_step") or 0.0)))
-    table = runs[0]  # the coarsest step with the coarsest plant step: the table's run
+    finer_steps = [o for o in runs if o["step"] < runs[0]["step"] * (1 - STEP_MATCH)]
+    chain_ratio = _ratio(finer_steps[0]) if finer_steps else None  # h_p / h of the communication axis
+    top = [o for o in runs if _same(o["step"], runs[0]["step"])]
+    # the table's run: the coarsest step at the communication axis's h_p / h (the others there: the plant axis)
+    table = next((o for o in top if chain_ratio is not None and _ratio(o) is not None
+                  and _same(_ratio(o), chain_ratio)), top[0])
     chain = [o for o in runs if _ratio(o) is None or _ratio(table) is None or _same(_ratio(o), _ratio(table))]
     chain = [o for o in chain if o is table or o["step"] < table["step"] * (1 - STEP_MATCH)]
     finest = chain[-1]
@@ -192,18 +198,20 @@ def estimate(ladder: list, metric: str) -> Estimate | None:
             error, note = communication_error(values[-2:])
         else:
             error, note = communication_error(values)
-    plant = [o for o in runs if o is not table and _same(o["step"], table["step"]) and _ratio(o) is not None
-             and _ratio(table) is not None and _ratio(o) < _ratio(table) * (1 - STEP_MATCH)]
+    plant = [o for o in top if o is not table and _ratio(o) is not None and _ratio(table) is not None
+             and not _same(_ratio(o), _ratio(table))]
     if not plant:
-        plant_change, note = math.inf, note or "no run with a finer plant step"
+        plant_error, note = math.inf, note or "no run at another plant step"
     elif plant[0]["status"] != "ok" or _value(plant[0], metric) is None or _value(table, metric) is None:
-        plant_change, note = math.inf, note or "the run with a finer plant step failed or gives no value"
+        plant_error, note = math.inf, note or "the run at another plant step failed or gives no value"
     else:
-        finer, coarse = _value(plant[0], metric), _value(table, metric)
-        plant_change = 0.0 if finer == coarse else abs(finer - coarse)  # inf - inf: both unsettled
-        if math.isnan(plant_change) or (math.inf in (finer, coarse) and finer != coarse):
-            plant_change, note = math.inf, note or "settles at one plant step and not at the other"
-    error = SAFETY_FACTOR * (error + PLANT_ORDER_FACTOR * plant_change)
+        other, own = _value(plant[0], metric), _value(table, metric)
+        change = 0.0 if other == own else abs(other - own)  # inf - inf: unsettled at both
+        if math.isnan(change) or (math.inf in (other, own) and other != own):
+            plant_error, note = math.inf, note or "settles at one plant step and not at the other"
+        else:  # first order in h_p: the error left at the table's h_p, from the change to the other h_p
+            plant_error = change * _ratio(table) / abs(_ratio(plant[0]) - _ratio(table))
+    error = SAFETY_FACTOR * (error + plant_error)
     if value == math.inf:  # not settled within the horizon at every step of the ladder
         error = 0.0 if math.isfinite(error) else error
     elif metric in GRID_QUANTISED:

@@ -7,7 +7,7 @@ refines both (harness/studies/claims.py turns it into value +- error, docs/verif
 * the communication axis: the case at h / 2, h / 4, ... with the plant's internal step halved with it
   (the same h_p / h: where the manipulator's link sticks, RK4 of sgn(x2) chatters by an amount set by
   h_p / h, so halving h alone shows no change of it);
-* the plant axis: the case at h with half the plant's internal step.
+* the plant axis: the case at h with twice the plant's internal step (half of it where h holds one).
 
 Model Exchange (``--algorithm me``) has no step: its ladder is the same case at tolerances
 claims.TOLERANCE_FACTOR apart.  Every row of a ladder carries its plant step (``plant_step``).
@@ -65,13 +65,17 @@ def half_step_case(case: Case) -> Case:
 
 
 def plant_step_case(case: Case) -> Case | None:
-    """The plant axis of the claims' ladder: the same case at its step with the plant's internal step halved;
-    None for Model Exchange (no fixed step) or a plant without an internal step."""
+    """The plant axis of the claims' ladder: the same case at its step with twice the plant's internal step
+    where the step holds two plant steps or more (the cheaper run), else half of it; None for Model Exchange
+    (no fixed step) or a plant without an internal step."""
     if case.algorithm == MODEL_EXCHANGE:
         return None
     scenario = case.build()
     internal = plant_step(scenario)
-    return None if internal is None else at_steps(case, scenario.step, internal / 2)
+    if internal is None:
+        return None
+    other = 2 * internal if scenario.step >= 2 * internal * (1 - 1e-9) else internal / 2
+    return at_steps(case, scenario.step, other)
 
 
 def ladder_cases(case: Case) -> list:

@@ -4,7 +4,7 @@
 (4 scenarios x vud, fixed, fae) in parallel processes and writes table1.csv,
 table2.csv, report.md and figures like the paper's Figs. 4-8 to DIR.  It also
 runs each case at half its step (the plant's internal step halved with it) and at its
-step with half the plant's internal step (and, with ``--refine``, the cases an open
+step with another plant's internal step (and, with ``--refine``, the cases an open
 claim needs finer still; harness/studies/ladders.py): harness/studies/claims.py
 decides the paper's claims on those ladders.
 Beyond the paper, it runs the third-order plant (motor_arm x vud, fixed, fae x
@@ -235,12 +235,13 @@ def peak_memory_mib() -> float:
 
 CLAIMS_METHOD = (
     "Each claim is decided on ladders that refine what the error depends on: every case also runs at half the "
-    "scenario's step h (the plant's internal RK4 step halved with it) and at h with half the plant's internal "
-    "step, and a case that an open claim needs at a further half (`--refine`). A score is its value at the "
-    "finest step run, ± an estimate of its distance to the continuous-time value of the model: "
-    f"{claims_module.SAFETY_FACTOR:g} x (the change of that score over the last halving of the step + "
-    f"{claims_module.PLANT_ORDER_FACTOR:g} x its change when the plant's step is halved) (the loop is first order "
-    "in the step, the plant's RK4 first order where the Coulomb friction switches; docs/verification.md). A "
+    "scenario's step h (the plant's internal RK4 step halved with it) and at h with another plant step (twice "
+    "it, or half where h holds one), and a case that an open claim needs at a further half (`--refine`). A score "
+    "is its value at the finest step run, ± an estimate of its distance to the continuous-time value of the "
+    f"model: {claims_module.SAFETY_FACTOR:g} x (the change of that score over the last halving of the step + the "
+    "error its change with the plant step leaves at the scenario's plant step, first order: the change itself "
+    "from twice the plant step, twice the change to half of it) (the loop is first order in the step, the "
+    "plant's RK4 first order where the Coulomb friction switches; docs/verification.md). A "
     "ladder of three or more halvings whose last change is not the smallest shows no convergence: its error is "
     "unknown and its comparisons are *undecided at this step*. A comparison is decided only when the gap exceeds "
     "the sum of both errors; otherwise it is *not decided at this accuracy*; one decided by a gap under "
@@ -382,10 +383,10 @@ def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int
 
 
 def ladder_words(model_exchange: bool) -> str:
-    """How the claims' ladders begin: each case at h, at h/2 and at h with half the plant's internal step, or
+    """How the claims' ladders begin: each case at h, at h/2 and at h with another plant's internal step, or
     (Model Exchange) at rtol and a looser one."""
     return (f"at rtol and {claims_module.TOLERANCE_FACTOR:g} rtol" if model_exchange
-            else "at h, h/2 and h with half the plant step")
+            else "at h, h/2 and h with another plant step")
 
 
 def communication_steps(outcomes) -> int:
@@ -426,7 +427,7 @@ def tables_command(args) -> int:
     rtol = (args.rtol or DEFAULT_RTOL) if me else None
     cases = [Case(name, controller, stop=args.stop, figure_interval=0.01, algorithm=args.algorithm, rtol=rtol)
              for name in ALL_SCENARIOS for controller in CONTROLLERS]
-    # every case at h (the tables), at h/2 and at h with half the plant's internal step (the claims' error
+    # every case at h (the tables), at h/2 and at h with another plant's internal step (the claims' error
     # estimates) in one pool, the longest runs first, so both cores finish together
     extra = beyond_paper_cases(args.stop, args.algorithm, rtol)  # the third-order plant, beyond the paper (no claims)
     runs = sorted([*cases, *(c for case in cases for c in ladder_cases(case))], key=case_cost, reverse=True)
