@@ -391,8 +391,9 @@ def disturbance_claim(ladders: dict) -> Claim:
 def claims_check(ladders: dict) -> list:
     """Every claim of the paper with its verdict, the numbers with their errors, and what is open.
 
-    ``ladders`` maps (scenario, controller) to that case's outcome rows at halving steps
-    (at least h and h/2 for an error; each row with ``step``, ``status`` and the scores).
+    ``ladders`` maps (scenario, controller) to that case's ladder rows (harness/studies/ladders.py: at least h,
+    h/2 and h with another plant step for a finite error; each row with ``step``, ``plant_step``, ``status`` and
+    the scores).
     """
     claims = [
         best_claim("The proposed AFC has the shortest settling time ts in all four scenarios",

@@ -503,7 +503,7 @@ def register(commands):
                         help="shorter horizon (tests); default the scenarios' 20 s")
     tables.add_argument("--refine", type=cli_args.non_negative_int, default=1, metavar="LEVELS",
                         help="further halvings of the step for the cases an open claim needs (default 1; 0: "
-                             "decide on h and h/2 only)")
+                             "decide on the pool alone: h, h/2 and h with another plant step)")
     tables.add_argument("--algorithm", choices=("feedthrough", MODEL_EXCHANGE), default="feedthrough",
                         help="feedthrough: our co-simulation master (default); me: Model Exchange, the native FMUs "
                              "integrated by CVODE, no step (--edition native; docs/model_exchange.md)")
