@@ -121,7 +121,7 @@ SLOW = {
         "test_the_matrix_compares_hosts_that_agree_with_each_other",
         "test_the_native_edition_gives_every_host_the_same_rows_and_warnings",),
     "test_me_accuracy.py": ("test_the_page_says_what_it_measured",
-        "test_the_stuck_link_chatters_in_co_simulation_and_rests_in_model_exchange",
+        "test_the_stuck_link_chatters_in_co_simulation_by_the_plant_step_against_the_step",
         "test_the_tolerance_ladder_converges_to_the_co_simulation_limit",),
     "test_me_fmpy_agreement.py": EVERY_TEST,
     "test_me_master.py": ("test_a_value_beyond_its_bound_stops_both_loops_alike",
