@@ -17,6 +17,7 @@ import signal
 import time as clock
 
 from .fmi import release_extractions
+from .unpack import remove_dead_folders
 
 #: seconds a stopped worker has to unwind before SIGKILL
 END_GRACE_S = 5.0
@@ -93,6 +94,7 @@ def end_workers(executor, grace_s: float = END_GRACE_S) -> None:
         if process.is_alive():
             process.kill()
             process.join(1.0)
+    remove_dead_folders()  # what a worker killed before it could unwind had unpacked (harness/unpack.py)
 
 
 __all__ = ["Terminated", "WorkerStopped", "exit_status", "sigterm_as_interrupt", "worker_signals",
