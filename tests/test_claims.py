@@ -59,6 +59,18 @@ def test_an_estimate_is_the_finest_value_with_the_changes_of_both_axes():
     assert found.plant_step == 5e-5 and found.error == pytest.approx(1.25 * (0.012 + 0.008))  # the change itself
 
 
+def test_a_smooth_plant_has_no_plant_axis_and_no_plant_error_of_its_own():
+    """Rows that say their plant is smooth (``plant_axis`` False): the error is the communication axis' alone; the
+    same rows from a plant that switches, without their plant-axis run, have an unknown error."""
+    rows = [dict(outcome("s", "vud", 4e-4, Ec=418.234), plant_axis=False),
+            dict(outcome("s", "vud", 2e-4, Ec=418.222), plant_axis=False)]
+    found = claims.estimate(rows, "Ec")
+    assert found.value == 418.222 and found.error == pytest.approx(claims.SAFETY_FACTOR * 0.012) and not found.note
+    switching = [dict(row, plant_axis=True) for row in rows]
+    assert claims.estimate(switching, "Ec").error == math.inf
+    assert claims.estimate(switching, "Ec").note == "no run at another plant step"
+
+
 def test_the_plant_axis_sees_what_halving_the_step_with_the_plant_step_cannot():
     """The manipulator's stuck phases: the same h_p / h at h and h/2 gives the same chatter (a change of 0.04),
     half the plant step at h removes most of it (1.44): the error is the plant's, not the step's."""
@@ -323,13 +335,17 @@ def test_the_ladder_halves_the_step_with_the_plant_step_and_the_plant_step_alone
 
     case = Case(name, "vud", figure_interval=0.01)
     assert ladder_runs.plant_step(case.build()) == pytest.approx(internal, rel=1e-12)
-    half, plant = ladder_runs.ladder_cases(case)
+    switching = name == "manipulator"  # Coulomb friction: the only plant whose right-hand side switches
+    half, *plant_axis = ladder_runs.ladder_cases(case)
+    assert len(plant_axis) == switching and ladder_runs.needs_plant_axis(case.build()) == switching
+    plant = plant_axis[0] if switching else ladder_runs.plant_step_case(case, smooth_too=True)
     other = 2 * internal if step >= 2 * internal else internal / 2  # the cheaper run where h holds two
     for run, expected in ((half, (step / 2, internal / 2)), (plant, (step, other))):
         built = run.build()
         assert (built.step, ladder_runs.plant_step(built)) == pytest.approx(expected, rel=1e-12), run.label
         assert run.figure_interval is None and run.controller == "vud"
-        assert ladder_runs.ladder_row(run, {"step": built.step})["plant_step"] == pytest.approx(expected[1])
+        row = ladder_runs.ladder_row(run, {"step": built.step})
+        assert row["plant_step"] == pytest.approx(expected[1]) and row["plant_axis"] == switching
     rows = [ladder_runs.ladder_row(c, {"step": c.build().step}) for c in (case, half, plant)]
     finer = ladder_runs.finer_case(name, "vud", rows, None).build()
     assert (finer.step, ladder_runs.plant_step(finer)) == pytest.approx((step / 4, internal / 4), rel=1e-12)

@@ -23,13 +23,15 @@ estimate of its distance to the continuous-time value of the model, is
 * the plant error: the value's plant step is the table run's h_p / h (the communication axis keeps it), and
   the plant axis runs the case at h with another plant step h_p' (2 h_p where h holds two plant steps or
   more, else h_p / 2): a first-order integration leaves ``|s(h, h_p) - s(h, h_p')| h_p / |h_p' - h_p|`` at
-  h_p (the change itself from 2 h_p, twice the change to h_p / 2; RK4 is fourth order on a smooth plant,
-  first order where the Coulomb friction switches, so this bounds it);
+  h_p (the change itself from 2 h_p, twice the change to h_p / 2; RK4 is first order where the Coulomb
+  friction switches, so this bounds it).  A smooth plant (rows with ``plant_axis`` False) has no plant
+  axis and no plant error of its own: RK4 is fourth order in h_p there and the communication axis, which
+  halves h_p with h, counts it (harness/studies/ladders.py);
 * SAFETY_FACTOR: the factor of safety of Roache's grid convergence index for a ladder of a known order.
 
 ``ts`` is quantised to the communication grid: its error is at least the step of its run, and its
-changes are steps of the grid, so only its last halving counts (no convergence test).  A ladder
-without the plant-axis run (or whose needed run failed) has an infinite error.
+changes are steps of the grid, so only its last halving counts (no convergence test).  A ladder that
+needs the plant axis and has no run on it (or whose needed run failed) has an infinite error.
 
 A comparison "vud below other" is decided only when the gap exceeds the combined
 error (the sum of both errors: discretisation errors are systematic, not random,
@@ -200,7 +202,9 @@ def estimate(ladder: list, metric: str) -> Estimate | None:
             error, note = communication_error(values)
     plant = [o for o in top if o is not table and _ratio(o) is not None and _ratio(table) is not None
              and not _same(_ratio(o), _ratio(table))]
-    if not plant:
+    if not plant and not any(o.get("plant_axis", True) for o in ladder):
+        plant_error = 0.0  # a smooth plant: the communication axis counts its RK4 error (ladders.py)
+    elif not plant:
         plant_error, note = math.inf, note or "no run at another plant step"
     elif plant[0]["status"] != "ok" or _value(plant[0], metric) is None or _value(table, metric) is None:
         plant_error, note = math.inf, note or "the run at another plant step failed or gives no value"

@@ -7,10 +7,16 @@ refines both (harness/studies/claims.py turns it into value +- error, docs/verif
 * the communication axis: the case at h / 2, h / 4, ... with the plant's internal step halved with it
   (the same h_p / h: where the manipulator's link sticks, RK4 of sgn(x2) chatters by an amount set by
   h_p / h, so halving h alone shows no change of it);
-* the plant axis: the case at h with twice the plant's internal step (half of it where h holds one).
+* the plant axis, for a plant whose right-hand side switches (its Model Exchange interface declares event
+  indicators: the manipulator's Coulomb friction; a plant of one's own FMU counts as switching): the case
+  at h with twice the plant's internal step (half of it where h holds one).  A smooth plant needs no
+  plant axis: RK4's error there is fourth order in h_p alone, and the communication axis, which halves
+  h_p with h, takes 15/16 of that error away, so its change already counts it (tests/test_error_bars.py runs
+  the left-out plant axis of the smooth plants: the RK4 error it shows is below a quarter of the printed error).
 
 Model Exchange (``--algorithm me``) has no step: its ladder is the same case at tolerances
-claims.TOLERANCE_FACTOR apart.  Every row of a ladder carries its plant step (``plant_step``).
+claims.TOLERANCE_FACTOR apart.  Every row of a ladder carries its plant step (``plant_step``) and
+whether its case needs the plant axis (``plant_axis``).
 """
 from __future__ import annotations
 
@@ -43,6 +49,25 @@ def plant_step(scenario) -> float | None:
     return scenario.step / plant_integration.internal_step_count(scenario.step, float(limit))
 
 
+def switching_plant(scenario) -> bool:
+    """Whether the plant's right-hand side switches: its declaration's Model Exchange interface has event
+    indicators (the manipulator's stick and slip); True for a plant of its own FMU (nothing declared here)."""
+    spec = scenario.components.get(PLANT)
+    if spec is None:
+        return False
+    try:
+        interface = fmu_catalog.declaration(spec.fmu).model_exchange()
+    except (KeyError, ImportError, AttributeError):  # an FMU of its own (a path): assume the worst
+        return True
+    return bool(interface.event_indicators)
+
+
+def needs_plant_axis(scenario) -> bool:
+    """A co-simulation of ``scenario`` needs the plant axis: its plant has an internal RK4 step and a
+    right-hand side that switches (see the module's doc)."""
+    return plant_step(scenario) is not None and switching_plant(scenario)
+
+
 def at_steps(case: Case, step: float, internal: float) -> Case:
     """The same case (no figure signals) at the communication step ``step`` with the plant's internal step
     ``internal`` (its max_internal_step set to it: ``step`` / ``internal`` whole steps)."""
@@ -64,15 +89,15 @@ def half_step_case(case: Case) -> Case:
     return at_steps(case, scenario.step / 2, internal / 2)
 
 
-def plant_step_case(case: Case) -> Case | None:
+def plant_step_case(case: Case, smooth_too: bool = False) -> Case | None:
     """The plant axis of the claims' ladder: the same case at its step with twice the plant's internal step
     where the step holds two plant steps or more (the cheaper run), else half of it; None for Model Exchange
-    (no fixed step) or a plant without an internal step."""
+    (no fixed step), a plant without an internal step, or (unless ``smooth_too``) a smooth plant."""
     if case.algorithm == MODEL_EXCHANGE:
         return None
     scenario = case.build()
     internal = plant_step(scenario)
-    if internal is None:
+    if internal is None or not (smooth_too or switching_plant(scenario)):
         return None
     other = 2 * internal if scenario.step >= 2 * internal * (1 - 1e-9) else internal / 2
     return at_steps(case, scenario.step, other)
@@ -84,8 +109,12 @@ def ladder_cases(case: Case) -> list:
 
 
 def ladder_row(case: Case, outcome: dict) -> dict:
-    """A run's outcome as a row of its ladder: with the plant's internal step (None for Model Exchange)."""
-    return dict(outcome, plant_step=None if case.algorithm == MODEL_EXCHANGE else plant_step(case.build()))
+    """A run's outcome as a row of its ladder: with the plant's internal step and whether the case needs the
+    plant axis (None and False for Model Exchange)."""
+    if case.algorithm == MODEL_EXCHANGE:
+        return dict(outcome, plant_step=None, plant_axis=False)
+    scenario = case.build()
+    return dict(outcome, plant_step=plant_step(scenario), plant_axis=needs_plant_axis(scenario))
 
 
 def case_cost(case: Case) -> int:
@@ -102,3 +131,4 @@ def finer_case(name: str, controller: str, ladder: list, stop: float | None) -> 
     if finest.get("plant_step"):
         return at_steps(Case(name, controller, stop=stop), finest["step"] / 2, finest["plant_step"] / 2)
     return Case(name, controller, step=finest["step"] / 2, stop=stop)
+
