@@ -24,10 +24,23 @@ SETTLING_BAND = 0.05  # ts: |e| within 5 % of max|ym| (docs/model.md section 10,
 #: reference ym = A sin t, so that every phase of the motion is tracked inside the band (choice 13)
 SETTLING_DWELL = REFERENCE_PERIOD
 NOT_SETTLED = "not settled"
+
+
+def dwell_text(dwell: float | None = None) -> str:
+    """The settling dwell for people: "one reference period (2 pi s)" or its length in seconds."""
+    dwell = SETTLING_DWELL if dwell is None else dwell
+    return "one reference period (2 pi s)" if math.isclose(dwell, REFERENCE_PERIOD) else f"{dwell:.6g} s"
+
+
+def settling_text() -> str:
+    """How ts is read (the constants SETTLING_BAND and SETTLING_DWELL, choice 13), for reports."""
+    return (f"ts is the earliest time after which |e| <= {100 * SETTLING_BAND:g} % of max|ym| until the stop time T, "
+            f"provided that leaves at least {dwell_text()} inside the band; else the run is *not settled within "
+            "the horizon*")
 #: what each score is, for reports (docs/model.md section 9 (scores)); units: harness/units.py score_units
 DEFINITIONS = {
-    "ts": "settling time: the earliest time after which |e| <= 5 % of max|ym| until the stop time T, "
-          "provided that leaves at least one reference period (2 pi s) inside the band (not settled: no such time)",
+    "ts": f"settling time: the earliest time after which |e| <= {100 * SETTLING_BAND:g} % of max|ym| until the stop "
+          f"time T, provided that leaves at least {dwell_text()} inside the band (not settled: no such time)",
     "es1_pct": "steady-state error of e: 100 max|e| / max|ym| over the last reference period [T - 2 pi, T]",
     "es2_pct": "steady-state error of de: 100 max|de| / max|dym| over the same window",
     "ITAE": "integral of t ||e|| dt over [0, T], ||e|| = sqrt(e^2 + de^2 (+ d2e^2 for order 3)), its terms "
@@ -58,8 +71,8 @@ def why_none(metric: str, start: float, stop: float) -> str:
     if reason is not None:
         return reason
     if metric == "ts":
-        return (f"|e| does not stay inside the {100 * SETTLING_BAND:g} % band of max|ym| for one reference period "
-                f"(2 pi s) before the stop time {stop:g} s")
+        return (f"|e| does not stay inside the {100 * SETTLING_BAND:g} % band of max|ym| for {dwell_text()} "
+                f"before the stop time {stop:g} s")
     return "the run gave no value"
 
 

@@ -130,6 +130,41 @@ def test_figures_define_the_controllers_and_draw_the_settling_band(fmu_paths):
         plt.close(fig)
 
 
+def test_the_choices_say_the_settling_dwell_and_the_plant_steps_the_code_runs(monkeypatch):
+    """The report's choices are the code's: the dwell of ts (harness/scores.py) and each scenario's communication
+    step, internal RK4 step and plant-axis step (the scenarios, harness/studies/ladders.py); they follow a change."""
+    from harness import scores
+    from harness.cases import Case
+    from harness.studies import ladders
+
+    text = tables.choices_text()
+    assert "for at least one reference period (2 pi s) inside the band" not in text  # the old ts wording
+    assert f"<= {100 * scores.SETTLING_BAND:g} % of max|ym|" in text
+    assert "provided that leaves at least one reference period (2 pi s) inside the band" in text
+    assert "not settled within the horizon" in text and "internal steps <= 0.1 ms" not in text
+    line = next(line for line in text.splitlines() if "RK4" in line)
+    for name in tables.ALL_SCENARIOS:
+        case = Case(name, "vud")
+        scenario = case.build()
+        internal = ladders.plant_step(scenario)
+        count = round(scenario.step / internal)
+        words = f"h = {tables._seconds(scenario.step)}, {count} RK4 step{'s' if count > 1 else ''} of " \
+                f"{tables._seconds(internal)}"
+        axis = ladders.plant_step_case(case)
+        if axis is not None:
+            words += f" (the plant axis: {tables._seconds(ladders.plant_step(axis.build()))})"
+        group = next(part for part in line.split("; ") if name in part)
+        assert words in group, (name, words, line)
+    assert tables._seconds(6.25e-6) == "6.25 us" and tables._seconds(4e-4) == "0.4 ms"
+    # the line follows the constants it states
+    monkeypatch.setattr(scores, "SETTLING_DWELL", 3.0)
+    monkeypatch.setattr(scores, "SETTLING_BAND", 0.02)
+    changed = tables.choices_text()
+    assert "at least 3 s inside the band" in changed and "<= 2 % of max|ym|" in changed
+    monkeypatch.setattr(ladders.plant_integration, "internal_step_count", lambda step, limit: 5)
+    assert "5 RK4 steps of 0.1 ms" in tables.choices_text()  # pendulum_case1: 0.5 ms in 5
+
+
 def test_tables_in_model_exchange_decide_the_claims_on_tolerance_ladders(tmp_path, capsys, monkeypatch):
     if not build_native.compiler_available():
         pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")

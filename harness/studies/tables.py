@@ -26,10 +26,10 @@ from .. import scenario as scenarios
 from ..cases import Case, default_jobs, run_cases
 from ..me_master import ALGORITHM as MODEL_EXCHANGE
 from ..me_master import DEFAULT_RTOL
-from ..scores import DEFINITIONS, SCORE_KEYS, SETTLING_BAND, undefined_reason, value_text, why_none
+from ..scores import DEFINITIONS, SCORE_KEYS, SETTLING_BAND, settling_text, undefined_reason, value_text, why_none
 from ..units import score_units, variable_unit, with_unit
 from . import claims as claims_module
-from .ladders import case_cost, finer_case, ladder_cases, ladder_row
+from .ladders import case_cost, finer_case, ladder_cases, ladder_row, plant_step, plant_step_case
 from .step_study import convergence_summary, load_convergence, validated_step
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -226,13 +226,45 @@ def draw_figure(name: str, runs: list, plt):
     return fig
 
 
+def _seconds(value: float) -> str:
+    """A step for people: in ms, or in us below 0.1 ms."""
+    return f"{value * 1e3:.4g} ms" if value >= 1e-4 else f"{value * 1e6:.4g} us"
+
+
+def integration_text() -> str:
+    """How each scenario's plant is integrated (its step h and the plant's internal RK4 step, from the scenarios) and
+    how the claims' ladders refine that step (harness/studies/ladders.py)."""
+    groups = {}
+    for name in ALL_SCENARIOS:
+        case = Case(name, CONTROLLERS[0])
+        scenario = case.build()
+        internal = plant_step(scenario)
+        axis = plant_step_case(case)
+        key = (scenario.step, internal, None if axis is None else plant_step(axis.build()))
+        groups.setdefault(key, []).append(name)
+    parts = []
+    for (step, internal, other), names in groups.items():
+        where = f"{', '.join(names)}: h = {_seconds(step)}"
+        if internal is None:
+            parts.append(f"{where}, the plant's own integration")
+            continue
+        count = round(step / internal)
+        text = f"{where}, {count} RK4 step{'s' if count > 1 else ''} of {_seconds(internal)}"
+        parts.append(text + (f" (the plant axis: {_seconds(other)})" if other is not None else ""))
+    axis = any(other is not None for _, _, other in groups)
+    return ("plants integrated with RK4 in equal internal steps of at most the plant's max_internal_step within each "
+            f"communication step ({'; '.join(parts)}); the claims' ladders halve the internal step with h"
+            + (" and run h with another internal step (the plant axis)" if axis else ""))
+
+
 def choices_text() -> str:
-    return """The numbers depend on these choices (the paper is ambiguous there; all of them: docs/model.md, section 10):
+    """The choices the report's numbers depend on; the settling rule and the integration from the code's constants."""
+    return f"""The numbers depend on these choices (the paper is ambiguous there; all of them: docs/model.md, section 10):
 - Normalised FLS inputs saturated to the universe [-E_i, E_i]; sigmoid membership functions (slope 7 pendulum, 1.5 manipulator).
 - Modified tracking error E = e - (a0 + a1 t) exp(-5 t) (Remark 3) used by all three controllers, e(0), de(0) latched at the end of initialisation.
 - Comparison controllers are documented stand-ins with the same learning rate (gamma = 300): `fixed` (alpha = 1) for [46], `fae` (alpha = 1 plus w_hat, gamma_w = gamma) for [28]; the equations of [46] and [28] are not public here.
-- Pendulum disturbance d(t) enters additively in dx2; horizon 0-20 s; ts is the earliest time after which |e| <= 5 % max|ym| until T; es1, es2 are 100 max|e|, 100 max|de| over the last reference period [T - 2 pi, T] over max|ym|, max|dym|.
-- Sampled-data controller: u held over each communication step, theta += h * dtheta; plants integrated with RK4 at internal steps <= 0.1 ms; scores by the trapezoidal rule on the communication grid."""
+- Pendulum disturbance d(t) enters additively in dx2; horizon 0-20 s; {settling_text()}; es1, es2 are 100 max|e|, 100 max|de| over the last reference period [T - 2 pi, T] over max|ym|, max|dym|.
+- Sampled-data controller: u held over each communication step, theta += h * dtheta; {integration_text()}; scores by the trapezoidal rule on the communication grid."""
 
 
 def peak_memory_mib() -> float:
