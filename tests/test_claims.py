@@ -266,14 +266,17 @@ def test_refinement_runs_the_open_cases_at_half_their_finest_step_and_decides_ag
     finer = {"vud": 418.217, "fae": 418.096}  # the 0.1 ms runs of the step study
     requested = []
 
-    def fake_run_cases(cases, jobs=None, description="", progress=None):
+    native = {"Manipulator": "native/Manipulator.fmu"}  # the FMUs the ladders run on, handed through
+
+    def fake_run_cases(cases, jobs=None, description="", progress=None, fmu_paths=None):
+        assert fmu_paths is native
         requested.append([(c.scenario, c.controller, c.step) for c in cases])
         return [outcome(c.scenario, c.controller, c.step,
                         **{m: DEFAULT[c.controller] for m in METRICS if m != "Ec"}, Ec=finer[c.controller])
                 for c in cases]
 
     monkeypatch.setattr(tables, "run_cases", fake_run_cases)
-    found, refined = tables.refine_open_claims(ladder_set, stop=None, jobs=1, levels=3)
+    found, refined = tables.refine_open_claims(ladder_set, stop=None, jobs=1, levels=3, fmu_paths=native)
     assert len(requested) == 1  # one level was enough
     assert sorted(requested[0]) == [("pendulum_case1", "fae", STEP / 4), ("pendulum_case1", "vud", STEP / 4)]
     assert sorted(refined) == sorted(requested[0])

@@ -1,5 +1,6 @@
 """End-to-end: `tables` on a shortened horizon; the step study: tests/test_step_study.py."""
 import csv
+import math
 import re
 
 import matplotlib
@@ -65,21 +66,34 @@ def test_tables_writes_tables_report_and_figures(fmu_paths, tmp_path, capsys, mo
         assert " ± " not in claim and f"no {metric}_pct (vud, fixed, fae: the horizon 0.3 s is shorter" in claim, claim
     assert "es1 and es2 are n/a in every table and their claims are not decided" in captured.err
     # stderr is not a terminal here (as under `| cat` or in a CI log): progress lines, not silence
-    words = "Table I/II at h, h/2 and h with another plant step, third-order plant"
-    assert f"{words}: 1/42 runs done in " in captured.err, captured.err
-    assert re.search(rf"{re.escape(words)}: 42/42 runs done in \d+ s\n", captured.err)
+    native = build_native.compiler_available()  # the ladders' own runs then take the native FMUs, in a pool first
+    if native:
+        ladder_words = "claims' ladders on the native FMUs (h/2 and h with another plant step)"
+        assert f"{ladder_words}: 1/15 runs done in " in captured.err, captured.err
+        assert re.search(rf"{re.escape(ladder_words)}: 15/15 runs done in \d+ s\n", captured.err)
+        words, pooled = "Table I/II at h, third-order plant", 18
+    else:
+        words, pooled = "Table I/II at h, h/2 and h with another plant step, third-order plant", 33
+    assert f"{words}: 1/{pooled} runs done in " in captured.err, captured.err
+    assert re.search(rf"{re.escape(words)}: {pooled}/{pooled} runs done in \d+ s\n", captured.err)
     # the first line counts every run the progress lines count, with the steps of each run's horizon and step
-    first = re.fullmatch(r"42 runs: 42 in one pool in [\d.]+ s \(the 12 cases of Tables I/II at h, h/2 and h with "
-                         r"another plant step, 6 of the third-order plant\), 0 finer for open claims in [\d.]+ s; "
-                         r"(\d+) communication steps, (\d+) plant RK4 steps, [\d.]+ s wall on 2 processes; peak "
-                         r"memory \d+ MiB \(largest process\)", out.splitlines()[0])
+    where = ("two pools", "; the ladders' runs at h/2 and h with another plant step and finer on the native FMUs") \
+        if native else ("one pool", "")
+    first = re.fullmatch(rf"33 runs: 33 in {where[0]} in [\d.]+ s \(the 12 cases of Tables I/II at h, h/2 and h with "
+                         rf"another plant step, 6 of the third-order plant{re.escape(where[1])}\), 0 finer for open "
+                         r"claims in [\d.]+ s; (\d+) communication steps, (\d+) plant RK4 steps, [\d.]+ s wall on 2 "
+                         r"processes; peak memory \d+ MiB \(largest process\)", out.splitlines()[0])
     assert first, out.splitlines()[0]
+    if native:
+        assert "The tables' runs at h are the pythonfmu FMUs' and the first rung of each ladder" in report
     paper = [row for name in ("table1.csv", "table2.csv") for row in csv.DictReader(open(tmp_path / name))]
-    # h, h/2 (twice the steps) and h with another plant step of each paper case, the third-order runs
-    assert int(first.group(1)) == sum(4 * round(0.3 / float(r["step"])) for r in paper) + \
+    # h, h/2 (twice the steps) of each paper case, h with another plant step where the plant switches (the
+    # manipulator), the third-order runs
+    axis = {"pendulum_case1": 0, "pendulum_case2": 0, "pendulum_case3": 0, "manipulator": 1}
+    assert int(first.group(1)) == sum((3 + axis[r["scenario"]]) * round(0.3 / float(r["step"])) for r in paper) + \
         sum(round(0.3 / float(r["step"])) for r in beyond)
     internal = {"pendulum_case1": 2.5e-4, "pendulum_case2": 4e-4, "pendulum_case3": 4e-4, "manipulator": 6.25e-6}
-    plant_axis = {"pendulum_case1": 0.5, "pendulum_case2": 2, "pendulum_case3": 2, "manipulator": 0.5}  # 2 h_p or h_p/2
+    plant_axis = {"pendulum_case1": 0, "pendulum_case2": 0, "pendulum_case3": 0, "manipulator": 0.5}  # 2 h_p: half
     assert int(first.group(2)) == sum(round(0.3 / internal[r["scenario"]] * (1 + 2 + plant_axis[r["scenario"]]))
                                       for r in paper) + sum(round(0.3 / 6.25e-5) for r in beyond)
     # the report read by a control engineer
@@ -163,6 +177,43 @@ def test_the_choices_say_the_settling_dwell_and_the_plant_steps_the_code_runs(mo
     assert "at least 3 s inside the band" in changed and "<= 2 % of max|ym|" in changed
     monkeypatch.setattr(ladders.plant_integration, "internal_step_count", lambda step, limit: 5)
     assert "5 RK4 steps of 0.1 ms" in tables.choices_text()  # pendulum_case1: 0.5 ms in 5
+
+
+def score_difference(one: dict, other: dict) -> float:
+    """The largest relative difference of a score between two outcomes of one case (infinite where one gives a
+    score the other does not)."""
+    from harness.scores import SCORE_KEYS
+
+    assert one["status"] == other["status"] == "ok", (one.get("reason"), other.get("reason"))
+    worst = 0.0
+    for metric in SCORE_KEYS:
+        a, b = one[metric], other[metric]
+        if a is None or b is None:
+            worst = worst if a is b else math.inf
+            continue
+        scale = max(abs(a), abs(b))
+        worst = max(worst, abs(a - b) / scale if scale else 0.0)
+    return worst
+
+
+def test_the_native_ladders_give_the_pythonfmu_editions_scores(fmu_paths, monkeypatch):
+    """The pythonfmu tables run their ladders' own runs (h/2, the plant axis) on the native FMUs: every one of them
+    gives the scores the pythonfmu FMUs give (over 1 s: CI time)."""
+    if not build_native.compiler_available():
+        pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
+    from harness.studies import ladders
+
+    monkeypatch.delenv("AFC_EDITION", raising=False)
+    native = ladders.native_ladder_fmus()
+    assert native is not None and all("native" in str(path) for path in native.values())
+    runs = [c for case in tables.table_cases(stop=1.0) for c in ladders.ladder_cases(case)]
+    assert len(runs) == 15  # h/2 of the 12 cases, the plant axis of the manipulator's 3
+    python = cases.run_cases(runs, jobs=2, progress=False, fmu_paths=fmu_paths)
+    in_c = cases.run_cases(runs, jobs=2, progress=False, fmu_paths=native)
+    differences = {run.label: score_difference(a, b) for run, a, b in zip(runs, python, in_c)}
+    assert max(differences.values()) <= 1e-9, differences
+    monkeypatch.setenv("AFC_EDITION", "native")
+    assert ladders.native_ladder_fmus() is None  # a native edition's tables run their ladders on their own FMUs
 
 
 def test_tables_in_model_exchange_decide_the_claims_on_tolerance_ladders(tmp_path, capsys, monkeypatch):

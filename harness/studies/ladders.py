@@ -20,9 +20,12 @@ whether its case needs the plant axis (``plant_axis``).
 """
 from __future__ import annotations
 
+from harness.fmu_build import builder as fmu_builder
 from harness.fmu_build import catalog as fmu_catalog
+from harness.fmu_build import native as native_build
 from plants import plant_integration
 
+from .. import master_loop
 from ..cases import Case
 from ..me_master import ALGORITHM as MODEL_EXCHANGE
 from . import claims as claims_module
@@ -131,4 +134,15 @@ def finer_case(name: str, controller: str, ladder: list, stop: float | None) -> 
     if finest.get("plant_step"):
         return at_steps(Case(name, controller, stop=stop), finest["step"] / 2, finest["plant_step"] / 2)
     return Case(name, controller, step=finest["step"] / 2, stop=stop)
+
+
+def native_ladder_fmus() -> dict | None:
+    """The FMUs the ladders run on where the tables run the pythonfmu edition: the native ones (FMI 2.0, the same
+    equations in C) with the master's compiled loop, a run in seconds; None where zig's C compiler is missing or
+    the tables already run a native edition (the ladders then run on the tables' own FMUs)."""
+    if fmu_catalog.selected_edition() != "python" or not native_build.compiler_available():
+        return None
+    if master_loop.library() is None:  # the compiled loop could not be built: say so once (compiled_loop.py)
+        return None
+    return fmu_builder.ensure_built(edition="native")
 

@@ -29,7 +29,7 @@ from ..me_master import DEFAULT_RTOL
 from ..scores import DEFINITIONS, SCORE_KEYS, SETTLING_BAND, settling_text, undefined_reason, value_text, why_none
 from ..units import score_units, variable_unit, with_unit
 from . import claims as claims_module
-from .ladders import case_cost, finer_case, ladder_cases, ladder_row, plant_step, plant_step_case
+from .ladders import case_cost, finer_case, ladder_cases, ladder_row, native_ladder_fmus, plant_step, plant_step_case
 from .step_study import convergence_summary, load_convergence, validated_step
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -44,6 +44,10 @@ HEADINGS = {"ts": "ts", "es1_pct": "es1", "es2_pct": "es2", "ITAE": "ITAE", "IAE
             "tv_u": "TV(u)/s"}
 BEYOND_PAPER = "motor_arm"  # a third-order plant of our own (docs/general_order.md)
 BEYOND_PAPER_SETS = (2, 3)  # fuzzy sets per input: M = 8 and 27 rules at order 3
+#: the ladders' own runs: the tables' runs at h are their first rung
+LADDER_RUNGS = "h/2 and h with another plant step"
+#: where the pythonfmu tables run their ladders (harness/studies/ladders.py native_ladder_fmus)
+NATIVE_LADDER_WORDS = f"the ladders' runs at {LADDER_RUNGS} and finer on the native FMUs"
 
 
 # ------------------------------------------------------------------ tables
@@ -278,12 +282,14 @@ def peak_memory_mib() -> float:
 
 CLAIMS_METHOD = (
     "Each claim is decided on ladders that refine what the error depends on: every case also runs at half the "
-    "scenario's step h (the plant's internal RK4 step halved with it) and at h with another plant step (twice "
-    "it, or half where h holds one), and a case that an open claim needs at a further half (`--refine`). A score "
+    "scenario's step h (the plant's internal RK4 step halved with it) and, where the plant's right-hand side "
+    "switches (the manipulator's Coulomb friction), at h with another plant step (twice it, or half where h holds "
+    "one), and a case that an open claim needs at a further half (`--refine`). A score "
     "is its value at the finest step run, ± an estimate of its distance to the continuous-time value of the "
     f"model: {claims_module.SAFETY_FACTOR:g} x (the change of that score over the last halving of the step + the "
     "error its change with the plant step leaves at the scenario's plant step, first order: the change itself "
-    "from twice the plant step, twice the change to half of it) (the loop is first order in the step, the "
+    "from twice the plant step, twice the change to half of it; none on a smooth plant, where RK4 is fourth order "
+    "and the halving of h with the plant step counts it) (the loop is first order in the step, the "
     "plant's RK4 first order where the Coulomb friction switches; docs/verification.md). A "
     "ladder of three or more halvings whose last change is not the smallest shows no convergence: its error is "
     "unknown and its comparisons are *undecided at this step*. A comparison is decided only when the gap exceeds "
@@ -358,7 +364,8 @@ def figure_caption(number: int, path: Path, rows: list) -> str:
 
 
 def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: list, wall_s: float, jobs: int,
-                    peak_mib: float = float("nan"), beyond_rows=(), rtol: float | None = None) -> str:
+                    peak_mib: float = float("nan"), beyond_rows=(), rtol: float | None = None,
+                    native_ladders: bool = False) -> str:
     how = ("one FMI co-simulation (controller, plant and reference FMUs coupled by the feedthrough-aware master)"
            if rtol is None else
            f"one Model Exchange run (the native FMUs integrated together by CVODE, rtol {rtol:g}, "
@@ -381,8 +388,9 @@ def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: l
                   "(converged by halving, docs/general_order.md).", "", beyond_paper_table(beyond_rows), ""]
         notes = table_notes(list(beyond_rows))
         parts += [*notes, ""] if notes else []
-    parts += ["## Claims of the paper, checked", "", PAPER_VALUES, "", CLAIMS_METHOD if rtol is None else CLAIMS_METHOD_ME,
-              ""]
+    method = CLAIMS_METHOD if rtol is None else CLAIMS_METHOD_ME
+    parts += ["## Claims of the paper, checked", "", PAPER_VALUES, "",
+              method + (f" {NATIVE_LADDERS_METHOD}" if native_ladders else ""), ""]
     parts += claims_module.claims_markdown(claims)
     parts += ["", "## Choices the numbers depend on", "", choices_text(), ""]
     parts += ["## Communication step (validated step, 1 %)", ""]
@@ -398,6 +406,10 @@ def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: l
     return "\n".join(parts) + "\n"
 
 
+NATIVE_LADDERS_METHOD = (
+    f"The tables' runs at h are the pythonfmu FMUs' and the first rung of each ladder; the ladders' runs at "
+    f"{LADDER_RUNGS} and finer run on the native FMUs (the same equations in C, with the master's compiled loop: "
+    "seconds instead of minutes), whose scores are the pythonfmu edition's (tests/test_tables.py holds them equal).")
 CLAIMS_METHOD_ME = (
     "Model Exchange (`--algorithm me`) has no step to halve: each claim is decided on tolerance ladders. Every "
     f"case also runs at a {claims_module.TOLERANCE_FACTOR:g} times looser rtol, and a case that an open claim "
@@ -407,9 +419,11 @@ CLAIMS_METHOD_ME = (
     "both errors; otherwise it is *not decided at this accuracy*.")
 
 
-def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int) -> tuple[list, list]:
+def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int,
+                       fmu_paths: dict | None = None) -> tuple[list, list]:
     """(claims, refined cases): up to ``levels`` further halvings of the step (tighter tolerances for
-    Model Exchange) for the cases a claim still open needs (``ladders`` gains their runs)."""
+    Model Exchange) for the cases a claim still open needs (``ladders`` gains their runs), on ``fmu_paths``
+    (None: the edition's FMUs)."""
     claims = claims_module.claims_check(ladders)
     refined = []
     for _ in range(levels):
@@ -418,7 +432,8 @@ def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int
             break
         finer = sorted((finer_case(name, controller, ladders[(name, controller)], stop)
                         for name, controller in sorted(open_cases)), key=case_cost, reverse=True)
-        for case, outcome in zip(finer, run_cases(finer, jobs=jobs, description="claims: finer steps")):
+        for case, outcome in zip(finer, run_cases(finer, jobs=jobs, description="claims: finer steps",
+                                                  fmu_paths=fmu_paths)):
             ladders[(outcome["scenario"], outcome["controller"])].append(ladder_row(case, outcome))
             refined.append((outcome["scenario"], outcome["controller"], outcome.get("rtol") or outcome["step"]))
         claims = claims_module.claims_check(ladders)
@@ -443,10 +458,13 @@ def plant_steps(rows) -> int:
 
 
 def run_summary(paper_cases: int, pooled: int, beyond: int, refined: int, pool_s: float, wall_s: float, jobs: int,
-                peak_mib: float, steps: int | None, model_exchange: bool, internal: int | None = None) -> str:
+                peak_mib: float, steps: int | None, model_exchange: bool, internal: int | None = None,
+                native_ladders: bool = False) -> str:
     """The command's first line: every run it made, by kind, with its wall time (README.md quotes the counts)."""
-    return (f"{pooled + refined} runs: {pooled} in one pool in {pool_s:.1f} s (the {paper_cases} cases of Tables I/II "
-            f"{ladder_words(model_exchange)}, {beyond} of the third-order plant), {refined} finer for open claims in "
+    pools = "two pools" if native_ladders else "one pool"
+    where = f"; {NATIVE_LADDER_WORDS}" if native_ladders else ""
+    return (f"{pooled + refined} runs: {pooled} in {pools} in {pool_s:.1f} s (the {paper_cases} cases of Tables I/II "
+            f"{ladder_words(model_exchange)}, {beyond} of the third-order plant{where}), {refined} finer for open claims in "
             f"{wall_s - pool_s:.1f} s; " + (f"{steps} communication steps, " if steps is not None else "")
             + (f"{internal} plant RK4 steps, " if internal else "")
             + f"{wall_s:.1f} s wall on {jobs} processes; peak memory {peak_mib:.0f} MiB (largest process)")
@@ -475,13 +493,21 @@ def tables_command(args) -> int:
     runs = sorted([*cases, *(c for case in cases for c in ladder_cases(case))], key=case_cost, reverse=True)
     started = clock.perf_counter()
     everything = sorted([*runs, *extra], key=case_cost, reverse=True)
-    outcomes = dict(zip(everything, run_cases(everything, jobs=jobs,
-                                              description=f"Table I/II {ladder_words(me)}, third-order plant")))
+    native = None if me else native_ladder_fmus()  # the pythonfmu tables' ladders: on the native FMUs (seconds)
+    if native is None:
+        outcomes = dict(zip(everything, run_cases(everything, jobs=jobs,
+                                                  description=f"Table I/II {ladder_words(me)}, third-order plant")))
+    else:  # the ladders' own runs (h/2, the plant axis) first, then the tables' runs at h, which the ladders reuse
+        finer = sorted((c for case in cases for c in ladder_cases(case)), key=case_cost, reverse=True)
+        outcomes = dict(zip(finer, run_cases(finer, jobs=jobs, fmu_paths=native,
+                                             description=f"claims' ladders on the native FMUs ({LADDER_RUNGS})")))
+        own = sorted([*cases, *extra], key=case_cost, reverse=True)
+        outcomes.update(zip(own, run_cases(own, jobs=jobs, description="Table I/II at h, third-order plant")))
     rows = [ladder_row(case, outcomes[case]) for case in cases]
     beyond_rows = [dict(outcomes[case], sets=dict(case.overrides)["controller.sets"]) for case in extra]
     ladders = claims_module.ladders_from_rows([ladder_row(case, outcomes[case]) for case in runs])
     ladder_s = clock.perf_counter() - started
-    claims, refined = refine_open_claims(ladders, args.stop, jobs, args.refine)
+    claims, refined = refine_open_claims(ladders, args.stop, jobs, args.refine, native)
     wall_s = clock.perf_counter() - started
     peak_mib = peak_memory_mib()
     convergence = load_convergence()
@@ -502,10 +528,11 @@ def tables_command(args) -> int:
                 ("scenario", "controller", "sets", *TABLE_COLUMNS[2:-2], "status"))
     figure_paths = figures(rows, out)
     atomic_files.write_text(out / "report.md", report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib,
-                                                   beyond_rows, rtol))
+                                                   beyond_rows, rtol, native is not None))
     counted = [*(o for ladder in ladders.values() for o in ladder), *(ladder_row(c, outcomes[c]) for c in extra)]
     print(run_summary(len(cases), len(everything), len(extra), len(refined), ladder_s, wall_s, jobs, peak_mib,
-                      None if me else communication_steps(counted), me, None if me else plant_steps(counted)))
+                      None if me else communication_steps(counted), me, None if me else plant_steps(counted),
+                      native is not None))
     for name in ALL_SCENARIOS:
         print(f"\n{name}\n{paper_table(rows, name)}")
     print(f"\n{BEYOND_PAPER} (beyond the paper)\n{beyond_paper_table(beyond_rows)}")
@@ -539,10 +566,11 @@ def tables_command(args) -> int:
 def register(commands):
     paper, pooled, beyond = pool_counts()
     tables = commands.add_parser("tables", help=f"run Table I/II and write the report: {pooled} co-simulations "
-                                                f"in one pool (the {paper} cases at their step, at half of it and at their "
-                                                f"step with another plant step, "
-                                                f"{beyond} of the third-order plant beyond the paper), then finer "
-                                                "ones for the claims left open (--refine)")
+                                                f"first (the {paper} cases at their step, at half of it and, where "
+                                                f"the plant switches, at their step with another plant step, "
+                                                f"{beyond} of the third-order plant beyond the paper; in the pythonfmu "
+                                                "edition the ladders' own on the native FMUs where zig is installed), "
+                                                "then finer ones for the claims left open (--refine)")
     tables.add_argument("--out", default="results", help="output folder (default results/, ignored by git)")
     tables.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
     tables.add_argument("--stop", type=cli_args.positive_float,
