@@ -564,7 +564,10 @@ def tables_command(args) -> int:
 
 
 def register(commands):
-    paper, pooled, beyond = pool_counts()
+    try:
+        paper, pooled, beyond = pool_counts()
+    except scenarios.ScenarioError:  # a scenario of the tables is missing: the command itself says which
+        paper, pooled, beyond = "Table I/II", "the", "the runs"
     tables = commands.add_parser("tables", help=f"run Table I/II and write the report: {pooled} co-simulations "
                                                 f"first (the {paper} cases at their step, at half of it and, where "
                                                 f"the plant switches, at their step with another plant step, "
