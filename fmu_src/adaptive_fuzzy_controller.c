@@ -46,6 +46,10 @@ typedef struct {
     ChatterMonitor chatter;         /* chatter statistic of u */
     ControllerParameters p;         /* the constants of the per-step path, P B, the latch's Remark 3 */
     double xi[MAX_RULES];           /* the basis (8) at the last output evaluation */
+    /* the measurement filter (F1): committed sample [started, its time, f_0 .. f_(n-1)], and the
+     * filtered errors of the last output evaluation (the Python edition's filter, _filtered_error) */
+    double filter[2 + MAX_ORDER];
+    double filtered[MAX_ORDER];
 } ControllerState;
 
 #define STATE(m) ((ControllerState *)(m)->internal)
@@ -123,6 +127,58 @@ void model_construct(ModelInstance *m) {
     for (int j = 0; j < rules; j++) state->xi[j] = 1.0 / rules;
 }
 
+/* ---- the robust cures (docs/model.md section 14 (robust cures)): each off at 0, kept in these functions.
+ * A table without their rows (an older declaration) gives 0: the paper's controller. */
+#ifdef VR_alpha_min
+#define CURE(m, name) V(m, name)
+#else
+#define CURE(m, name) 0.0
+#endif
+enum { FILTER_STARTED = 0, FILTER_TIME = 1, FILTER_VALUES = 2 };
+
+/* the filtered error inputs at this time (F1), in place: the committed filter state advanced by the
+ * time since its sample; before the first doStep (not started) the sample itself */
+static void filter_errors(ModelInstance *m, int n, double e[]) {
+    ControllerState *state = STATE(m);
+    if (state->filter[FILTER_STARTED] != 0.0) {
+        double gain = measurement_filter_gain(m->s->time - state->filter[FILTER_TIME], CURE(m, filter_time_constant));
+        filtered_measurements(n, state->filter + FILTER_VALUES, e, gain, e);
+    }
+    for (int i = 0; i < n; i++) state->filtered[i] = e[i];
+}
+
+/* commit the filter's sample at t (F1), after a doStep's adaptation */
+static void commit_filter(ModelInstance *m, int n, double time) {
+    ControllerState *state = STATE(m);
+    state->filter[FILTER_STARTED] = 1.0;
+    state->filter[FILTER_TIME] = time;
+    for (int i = 0; i < n; i++) state->filter[FILTER_VALUES + i] = state->filtered[i];
+}
+
+/* theta and w_hat after one step of the law with sigma-modification (31b) */
+static void leaky_step(ModelInstance *m, double tau, double step_size, const double theta[], double adapted[],
+                       double *w_hat) {
+    ControllerState *state = STATE(m);
+    const ControllerParameters *p = &state->p;
+    double rates[MAX_RULES], sigma = CURE(m, sigma);
+    adaptation_rates(p->rules, theta, tau, state->xi, V(m, gamma), V(m, m_theta), V(m, delta), rates);
+    leaky_weights(p->rules, theta, rates, sigma, step_size, adapted);
+    if (p->variant == VARIANT_FAE) *w_hat += step_size * (estimate_rate(tau, V(m, gamma_w)) - sigma * *w_hat);
+}
+
+/* Model Exchange refuses the measurement filter (F1): its state would be a continuous state the
+ * declaration does not have; a host filters e, de in its own blocks (or the Sensor's filter).
+ * A cross-parameter rule, so that in initialisation mode the outputs keep their start values */
+static int filter_in_model_exchange_error(ModelInstance *m, char *message, size_t size) {
+    if (m->model_exchange && CURE(m, filter_time_constant) > 0.0) {
+        snprintf(message, size, "parameter filter_time_constant = %.17g is invalid in Model Exchange; valid there: 0 "
+                 "(the measurement filter (F1) is co-simulation only: filter e, de in the host, or with the Sensor's "
+                 "filter_time_constant)", CURE(m, filter_time_constant));
+        return MODEL_ERROR;
+    }
+    return MODEL_OK;
+}
+
 /* cross_parameter_errors: the rule count within the table's rule weights and, for the
  * general controller, k Hurwitz (a positive definite P of (30)) */
 int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
@@ -137,6 +193,7 @@ int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
                  n, sets, rules_of(n, sets), N_theta, N_theta);
         return MODEL_ERROR;
     }
+    if (filter_in_model_exchange_error(m, message, size) != MODEL_OK) return MODEL_ERROR;
 #ifdef VR_order
     double k[MAX_ORDER], q[MAX_ORDER], p[MAX_ORDER][MAX_ORDER];
     for (int i = 0; i < n; i++) {
@@ -185,6 +242,7 @@ static int configure(ModelInstance *m) {
     p->lambda_e = V(m, lambda_e);
     p->lambda_ce = V(m, lambda_ce);
     p->mf_slope = V(m, mf_slope);
+    p->alpha_min = CURE(m, alpha_min); /* [23a]; 0 = off */
     for (int i = 0; i < n; i++) {
         k[i] = values[VRS_k[i]];
         q[i] = values[VRS_q[i]];
@@ -211,6 +269,7 @@ int model_initialize(ModelInstance *m, double start_time) {
     if (configure(m) != 0)
         return fmu_fail(m, "the Lyapunov equation (30) has no solution for these k: "
                         "s^n + k1 s^(n-1) + ... + kn must be Hurwitz");
+    state->filter[FILTER_STARTED] = 0.0; /* not started: the first sample passes (F1) */
 #if HOST_ROBUST
     if ((int)V(m, initial_error) == INITIAL_ERROR_PINNED) {
         double pinned[MAX_ORDER];
@@ -256,6 +315,7 @@ int model_compute_outputs(ModelInstance *m) {
         e[i] = values[ERROR_VR[i]];
         ym[i] = values[REFERENCE_VR[i]];
     }
+    if (CURE(m, filter_time_constant) > 0.0) filter_errors(m, n, e); /* (F1), off at 0 */
     for (int j = 0; j < rules; j++) theta[j] = values[VRS_theta[j]];
     double u = controller_output(e, ym, m->s->time, theta, V(m, w_hat), p, error, alpha, xi); /* [9] */
     int finite = isfinite(u);
@@ -282,6 +342,7 @@ static int watch_initial_error(ModelInstance *m, double time) {
     if (events & LATCH_RELATCHED) {
         latch_initial_error(m);
         restart_adaptation(m);
+        state->filter[FILTER_STARTED] = 0.0; /* the filter restarts at rest on the re-latched sample (F1) */
         if (model_compute_outputs(m) != MODEL_OK) return MODEL_ERROR; /* E, dE, xi from the new latch */
     }
     if (events & LATCH_DECIDED) {
@@ -313,14 +374,20 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     for (int i = 0; i < n; i++) error[i] = values[MODIFIED_ERROR_VR[i]];
     for (int j = 0; j < rules; j++) theta[j] = values[VRS_theta[j]];
     double tau = adaptation_signal(n, error, p->p_b); /* [31] */
-    adapted_weights(rules, theta, tau, state->xi, V(m, gamma), V(m, m_theta), V(m, delta), step_size, adapted);
+    double w_hat = V(m, w_hat);
+    if (CURE(m, dead_zone) > 0.0) tau = dead_zone_signal(tau, CURE(m, dead_zone)); /* (31a), off at 0 */
+    if (CURE(m, sigma) > 0.0) { /* (31b), off at 0 */
+        leaky_step(m, tau, step_size, theta, adapted, &w_hat);
+    } else {
+        adapted_weights(rules, theta, tau, state->xi, V(m, gamma), V(m, m_theta), V(m, delta), step_size, adapted);
+        if (p->variant == VARIANT_FAE) w_hat += step_size * V(m, gamma_w) * tau;
+    }
     int finite = 1;
     for (int j = 0; j < rules; j++) finite = finite && isfinite(adapted[j]);
-    double w_hat = V(m, w_hat);
-    if (p->variant == VARIANT_FAE) w_hat += step_size * V(m, gamma_w) * tau;
     if (!(finite && isfinite(w_hat))) return fail_adaptation_diverged(m, current_time, step_size, tau, error);
     for (int j = 0; j < rules; j++) values[VRS_theta[j]] = adapted[j];
     V(m, w_hat) = w_hat;
+    if (CURE(m, filter_time_constant) > 0.0) commit_filter(m, n, current_time); /* (F1) */
 #if HOST_ROBUST
     if (chatter_update(&state->chatter, V(m, u), step_size)) {
         char message[2048];
@@ -349,6 +416,12 @@ int model_set_continuous_states(ModelInstance *m, const double x[]) {
  * error E and the basis xi of the outputs (controller_output [9]), as a doStep takes them */
 int model_get_derivatives(ModelInstance *m, double dx[]) {
     ControllerState *state = STATE(m);
+    if (m->outputs_stale && m->s->initialized == 0.0) {
+        /* initialisation mode with invalid parameters (the outputs keep their start values, and so do
+         * the derivatives: 0); exitInitializationMode reports the parameter */
+        for (int j = 0; j < N_STATES; j++) dx[j] = 0.0;
+        return MODEL_OK;
+    }
     if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return MODEL_ERROR;
     const double *values = m->s->values;
     const ControllerParameters *p = &state->p;
@@ -357,9 +430,14 @@ int model_get_derivatives(ModelInstance *m, double dx[]) {
     for (int i = 0; i < n; i++) error[i] = values[MODIFIED_ERROR_VR[i]];
     for (int j = 0; j < rules; j++) theta[j] = values[VRS_theta[j]];
     double tau = adaptation_signal(n, error, p->p_b); /* [31] */
+    if (CURE(m, dead_zone) > 0.0) tau = dead_zone_signal(tau, CURE(m, dead_zone)); /* (31a), off at 0 */
     adaptation_rates(rules, theta, tau, state->xi, V(m, gamma), V(m, m_theta), V(m, delta), dx); /* [31] */
     for (int j = rules; j < N_theta; j++) dx[j] = 0.0; /* rule weights beyond sets^order stay 0 */
     dx[N_theta] = p->variant == VARIANT_FAE ? estimate_rate(tau, V(m, gamma_w)) : 0.0;
+    if (CURE(m, sigma) > 0.0) { /* (31b), off at 0 */
+        leaky_rates(rules, theta, dx, CURE(m, sigma), dx);
+        dx[N_theta] -= CURE(m, sigma) * V(m, w_hat);
+    }
     return MODEL_OK;
 }
 

@@ -16,7 +16,11 @@ Co-simulation semantics:
   placeholders at initialisation (``initial_error_latch``,
   docs/host_robustness.md), or from parameters.
 * The controller watches its own u for chatter (``chatter_monitor``) and
-  warns once, naming the step and the remedy.
+  warns once, naming the step and the remedies.
+* The robust cures (docs/model.md section 14 (robust cures)), each off at 0: a floor
+  alpha_min on alpha (in ``afc_math.controller_output``), a dead zone and sigma-modification
+  in the adaptive law (``step``), a first-order filter on the error inputs
+  (``compute_outputs``, committed in ``step``).
 * order n and sets m (Integer parameters, appended to the table) make it the
   controller of an nth-order plant with m fuzzy sets per input: wire e, de,
   ..., e^(n-1) (and ym, ..., ym^(n-1) for fls_input = 2); M = m^n rule
@@ -143,8 +147,20 @@ VARIABLES = (
              depends_on=("d3e", "d3ym")),
     *(Variable(f"theta{j}", OUTPUT, 0.0, description=f"rule weight theta_{j} (0 when {j} > sets^order)",
                initial_depends_on=THETA_INITIAL) for j in range(5, afc_math.RULES_MAX + 1)),
+    # ---- the robust cures (docs/model.md section 14 (robust cures)): appended rows, each off at its start value 0
+    Variable("alpha_min", PARAMETER, 0.0, minimum=0.0, maximum=1.0,
+             description="floor on the contraction-expansion factor: alpha_i = max(alpha_i(x_i), alpha_min) (23a), "
+                         "so 1 / alpha <= 1 / alpha_min (vud only); 0 = off, 1 = fixed universes"),
+    non_negative("dead_zone", 0.0, "", "half-width d0 of the dead zone of the adaptive law: no adaptation of "
+                                       "theta (and w_hat) while |tau| <= d0, tau = E^T P B (31a); 0 = off"),
+    non_negative("sigma", 0.0, "1/s", "sigma-modification: the leakage -sigma theta_j added to dtheta_j "
+                                      "(and -sigma w_hat to dw_hat) (31b); 0 = off"),
+    non_negative("filter_time_constant", 0.0, "s", "T_m of the first-order filter on the error inputs e, de, ... "
+                                                   "(F1), co-simulation only; 0 = off"),
 )
 ERROR_INPUTS = ("e", "de", "d2e", "d3e")  # e^(i), i = 0..3
+# the measurement filter's state (F1): [started (0 or 1), time of the committed sample, f_0 .. f_(n-1)]
+FILTER_STARTED, FILTER_TIME, FILTER_VALUES = 0, 1, 2
 REFERENCE_INPUTS = ("ym", "dym", "d2ym", "d3ym")
 ERROR_OUTPUTS = ("E", "dE", "d2E", "d3E")
 ALPHA_OUTPUTS = ("alpha1", "alpha2", "alpha3", "alpha4")
@@ -189,7 +205,7 @@ def _vector_getter(names):
 
 class AdaptiveFuzzyController(Fmi2Slave):
     VARIABLES = VARIABLES
-    STATE_ATTRIBUTES = ("latch", "chatter", "theta", "xi", "modified")
+    STATE_ATTRIBUTES = ("latch", "chatter", "theta", "xi", "modified", "filter")
     MODEL_DESCRIPTION = ("Direct adaptive fuzzy controller with variable universes of discourse "
                          "(Pan, Er, Huang, Wang, IEEE TFS 2011)")
 
@@ -207,6 +223,7 @@ class AdaptiveFuzzyController(Fmi2Slave):
         self.theta = [0.0] * afc_math.RULE_COUNT
         self.xi = (0.25, 0.25, 0.25, 0.25)
         self.modified = (0.0, 0.0)
+        self.filter = [0.0] * (FILTER_VALUES + 2)  # the measurement filter (F1), FILTER_* layout
         self._p = None
 
     def cross_parameter_errors(self):
@@ -243,6 +260,9 @@ class AdaptiveFuzzyController(Fmi2Slave):
         self._theta_outputs = THETA_OUTPUTS[:self._p["rules"]]
         self._p_b = self._p["p_b"]
         self._default_shape = n == 2 and self.sets == 2
+        self._filtered = self.filter_time_constant > 0.0  # the cures (F1), (31a), (31b): off at 0
+        self._dead_zone = self.dead_zone > 0.0
+        self._leaky = self.sigma > 0.0
 
     def _latch_initial_error(self):
         """e(t0), de(t0), ..., e^(n-1)(t0) and t0 of the modified error (36), from the latch rule's state."""
@@ -258,6 +278,7 @@ class AdaptiveFuzzyController(Fmi2Slave):
             latch_rule.start(self.latch, start_time, self._error_vector(self.__dict__))
         self._latch_initial_error()
         chatter_monitor.start(self.chatter)
+        self.filter = [0.0] * (FILTER_VALUES + n)  # not started: the first sample passes (F1)
         rules = self._p["rules"]
         attributes = self.__dict__
         attributes.update(dict.fromkeys(THETA_OUTPUTS[rules:], 0.0))
@@ -276,6 +297,7 @@ class AdaptiveFuzzyController(Fmi2Slave):
         if events & latch_rule.RELATCHED:
             self._latch_initial_error()
             self.restart_adaptation()
+            self.filter[FILTER_STARTED] = 0.0  # the filter restarts at rest on the re-latched sample (F1)
             self.compute_outputs()  # E, dE, xi of this step from the new latch
         if events & latch_rule.DECIDED:
             message = latch_rule.warning(self.latch, self._error_inputs)
@@ -291,6 +313,8 @@ class AdaptiveFuzzyController(Fmi2Slave):
     def compute_outputs(self):
         attributes = self.__dict__
         error = self._error_vector(attributes)
+        if self._filtered:
+            error = self._filtered_error = self._filter_error(error)
         reference = self._reference_vector(attributes)
         u, modified, alpha, xi = afc_math.controller_output(error, reference, self.time, self.theta,
                                                             self.w_hat, self._p)
@@ -307,6 +331,15 @@ class AdaptiveFuzzyController(Fmi2Slave):
         self.xi = xi  # a tuple; the FMU state stores it as a list
         self.outputs_stale = False
 
+    def _filter_error(self, sample) -> tuple:
+        """The filtered error inputs at this time (F1): the committed filter state advanced by the time
+        since its sample; before the first doStep (not started) the sample itself."""
+        state = self.filter
+        if not state[FILTER_STARTED]:
+            return tuple(sample)
+        gain = afc_math.measurement_filter_gain(self.time - state[FILTER_TIME], self.filter_time_constant)
+        return afc_math.filtered_measurements(state[FILTER_VALUES:], sample, gain)
+
     def _overflow(self, u, modified, error):
         self.fail(f"outputs overflow at t = {self.time!r}: u = {u!r}, E = {modified!r} from "
                   f"{', '.join(f'{name} = {value!r}' for name, value in zip(self._error_inputs, error))} "
@@ -317,11 +350,16 @@ class AdaptiveFuzzyController(Fmi2Slave):
         if self.latch[latch_rule.OPEN]:  # the first few doSteps only
             self.watch_initial_error(current_time)
         tau = afc_math.adaptation_signal(self.modified, self._p_b)
-        theta = afc_math.adapted_weights(self.theta, tau, self.xi, self.gamma, self.m_theta, self.delta,
-                                         step_size)
-        w_hat = self.w_hat
-        if self.variant == afc_math.VARIANT_FAE:
-            w_hat += step_size * self.gamma_w * tau
+        if self._dead_zone:
+            tau = afc_math.dead_zone_signal(tau, self.dead_zone)  # (31a)
+        if self._leaky:
+            theta, w_hat = self._leaky_step(tau, step_size)  # (31b)
+        else:
+            theta = afc_math.adapted_weights(self.theta, tau, self.xi, self.gamma, self.m_theta, self.delta,
+                                             step_size)
+            w_hat = self.w_hat
+            if self.variant == afc_math.VARIANT_FAE:
+                w_hat += step_size * self.gamma_w * tau
         if not -_INF < w_hat + sum(theta) < _INF:  # some theta or w_hat is NaN or inf (or all overflow together)
             self.fail(f"adaptation diverged in doStep(t={current_time!r}, h={step_size!r}): tau = {tau!r} "
                       f"from E = {self.modified!r}; theta and w_hat keep their values at t; "
@@ -332,6 +370,17 @@ class AdaptiveFuzzyController(Fmi2Slave):
         else:
             self.__dict__.update(zip(self._theta_outputs, theta))
         self.w_hat = w_hat
+        if self._filtered:  # commit the filter's sample at t (F1)
+            self.filter = [1.0, current_time, *self._filtered_error]
         if chatter_monitor.update(self.chatter, self.u, step_size):
             self.warn(chatter_monitor.warning(self.chatter, step_size))
         return True
+
+    def _leaky_step(self, tau, step_size):
+        """theta and w_hat after one step of the law with sigma-modification (31b)."""
+        rates = afc_math.adaptation_rates(self.theta, tau, self.xi, self.gamma, self.m_theta, self.delta)
+        theta = afc_math.leaky_weights(self.theta, rates, self.sigma, step_size)
+        w_hat = self.w_hat
+        if self.variant == afc_math.VARIANT_FAE:
+            w_hat += step_size * (afc_math.estimate_rate(tau, self.gamma_w) - self.sigma * w_hat)
+        return theta, w_hat

@@ -241,6 +241,32 @@ void adaptation_rates(int rules, const double theta[], double tau, const double 
 
 double estimate_rate(double tau, double gamma_w) { return gamma_w * tau; }
 
+/* ------------------------------------ robust cures  [23a], [31a], [31b], (F1) */
+void floored_contraction_factors(int n, const double alpha[], double alpha_min, double floored[]) {
+    for (int i = 0; i < n; i++) floored[i] = alpha[i] > alpha_min ? alpha[i] : alpha_min;
+}
+
+double dead_zone_signal(double tau, double width) {
+    if (tau > width) return tau - width;
+    if (tau < -width) return tau + width;
+    return 0.0;
+}
+
+void leaky_weights(int rules, const double theta[], const double rates[], double sigma, double step_size,
+                   double adapted[]) {
+    for (int j = 0; j < rules; j++) adapted[j] = theta[j] + step_size * (rates[j] - sigma * theta[j]);
+}
+
+void leaky_rates(int rules, const double theta[], const double rates[], double sigma, double out[]) {
+    for (int j = 0; j < rules; j++) out[j] = rates[j] - sigma * theta[j];
+}
+
+double measurement_filter_gain(double elapsed, double time_constant) { return 1.0 - exp(-elapsed / time_constant); }
+
+void filtered_measurements(int n, const double previous[], const double sample[], double gain, double filtered[]) {
+    for (int i = 0; i < n; i++) filtered[i] = previous[i] + gain * (sample[i] - previous[i]);
+}
+
 /* ----------------------------------------------------------- control law  [9] */
 void fls_inputs(int n, const double error[], const double reference[], const double modified[], int fls_input,
                 double x[]) {
@@ -278,6 +304,7 @@ double controller_output(const double error[], const double reference[], double 
     fls_inputs(n, error, reference, modified, p->fls_input, x);
     if (p->variant == VARIANT_VUD) {
         contraction_factors(n, x, p->lambda_ce, p->kappa, alpha);
+        if (p->alpha_min > 0.0) floored_contraction_factors(n, alpha, p->alpha_min, alpha); /* [23a], off at 0 */
     } else {
         for (int i = 0; i < n; i++) alpha[i] = 1.0;
     }

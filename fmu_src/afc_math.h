@@ -33,6 +33,12 @@
  * fls_inputs                 fls_inputs
  * contraction_factors        contraction_factors   [23]
  * normalized_inputs          normalized_inputs     [7]
+ * floored_contraction_factors floored_contraction_factors [23a]
+ * dead_zone_signal           dead_zone_signal      [31a]
+ * leaky_weights              leaky_weights         [31b]
+ * leaky_rates                leaky_rates           [31b]
+ * measurement_filter_gain    measurement_filter_gain (F1)
+ * filtered_measurements      filtered_measurements (F1)
  * controller_parameters      none: it builds the Python dict p from the FMU's parameter names;
  *                            in C, p is a ControllerParameters struct that the FMU fills
  *                            (configure in adaptive_fuzzy_controller.c, as the Python FMU's
@@ -69,6 +75,7 @@ typedef struct {
     double remark3[MAX_ORDER][MAX_ORDER];         /* remark3_polynomials of error0, per latch */
     int order, sets, rules;                       /* n, m, M = m^n */
     int variant, fls_input;
+    double alpha_min;                             /* the floor on alpha [23a]; 0 = off (appended) */
 } ControllerParameters;
 
 /* P solving A^T P + P A = -Q [30] for the companion matrix A of s^n + k1 s^(n-1) + ... + kn
@@ -145,6 +152,27 @@ void contraction_factors(int n, const double x[], double lambda_ce, const double
 
 /* (z_1, ..., z_n) = (x_1 / alpha_1, ...)  [7], each saturated to its universe */
 void normalized_inputs(int n, const double x[], const double alpha[], const double universe[], double z[]);
+
+/* ---- the robust cures (docs/model.md section 14 (robust cures)), each off at 0 */
+
+/* max(alpha_i, alpha_min) for each input: the floor on alpha [23a]; floored may be alpha */
+void floored_contraction_factors(int n, const double alpha[], double alpha_min, double floored[]);
+
+/* tau through the continuous dead zone of half-width d0 [31a]: 0 for |tau| <= d0, tau -+ d0 outside */
+double dead_zone_signal(double tau, double width);
+
+/* theta_j + h (dtheta_j - sigma theta_j) for every rule j: sigma-modification [31b] */
+void leaky_weights(int rules, const double theta[], const double rates[], double sigma, double step_size,
+                   double adapted[]);
+
+/* dtheta_j - sigma theta_j for every rule j: [31b] in continuous time (model exchange); out may be rates */
+void leaky_rates(int rules, const double theta[], const double rates[], double sigma, double out[]);
+
+/* a = 1 - exp(-dt / T_m) of the first-order measurement filter (F1) over elapsed = dt */
+double measurement_filter_gain(double elapsed, double time_constant);
+
+/* f_k = f_(k-1) + a (x_k - f_(k-1)) for each of the n entries (F1); filtered may be sample */
+void filtered_measurements(int n, const double previous[], const double sample[], double gain, double filtered[]);
 
 /* set the latched error vector e(t0), ... (p->order entries), t0 and the Remark 3 polynomials in p */
 void latch_error(ControllerParameters *p, const double error0[], double t0);

@@ -334,6 +334,61 @@ def estimate_rate(tau: float, gamma_w: float) -> float:
     return gamma_w * tau
 
 
+# ------------------------------------- robust cures  [23a], [31a], [31b], (F1)
+# The standard cures of robust adaptive control (docs/model.md section 14 (robust cures)), each off at 0: the
+# FMU calls them only when its parameter is not 0, so the defaults are the paper's controller bit for bit.
+def floored_contraction_factors(alpha, alpha_min: float) -> tuple:
+    """(max(alpha_1, alpha_min), ..., max(alpha_n, alpha_min)): the floor on alpha  [23a].
+
+    Bounds the magnification 1 / alpha of the normalised input (7) by 1 / alpha_min.
+    """
+    if len(alpha) == 2:  # unrolled
+        return (alpha[0] if alpha[0] > alpha_min else alpha_min, alpha[1] if alpha[1] > alpha_min else alpha_min)
+    return tuple(a if a > alpha_min else alpha_min for a in alpha)
+
+
+def dead_zone_signal(tau: float, width: float) -> float:
+    """tau of the adaptive law through a continuous dead zone of half-width d0  [31a]:
+    0 for |tau| <= d0, tau - d0 above, tau + d0 below.
+
+    No adaptation while the filtered tracking error tau = E^T P B stays inside the band the
+    noise alone keeps it in; continuous in tau, so Model Exchange needs no event.
+    """
+    if tau > width:
+        return tau - width
+    if tau < -width:
+        return tau + width
+    return 0.0
+
+
+def leaky_weights(theta, rates, sigma: float, step_size: float) -> list:
+    """theta_j + h (dtheta_j - sigma theta_j) for every rule j: sigma-modification  [31b].
+
+    ``rates`` the law's dtheta_j (:func:`adaptation_rates`); the leakage -sigma theta_j pulls
+    every weight towards 0 when the error no longer drives it.
+    """
+    return [value + step_size * (rate - sigma * value) for value, rate in zip(theta, rates)]
+
+
+def leaky_rates(theta, rates, sigma: float) -> list:
+    """dtheta_j - sigma theta_j for every rule j: [31b] in continuous time (Model Exchange)."""
+    return [rate - sigma * value for value, rate in zip(theta, rates)]
+
+
+def measurement_filter_gain(elapsed: float, time_constant: float) -> float:
+    """a = 1 - exp(-dt / T_m) of the first-order measurement filter (F1) over ``elapsed`` = dt."""
+    return 1.0 - math.exp(-elapsed / time_constant)
+
+
+def filtered_measurements(previous, sample, gain: float) -> tuple:
+    """f_k = f_(k-1) + a (x_k - f_(k-1)) for each entry: the measurement filter on e, de, ...  (F1).
+
+    The step-invariant discretisation of T_m df/dt = x - f with unit DC gain; gain = 1 gives the
+    sample itself (the filter started at rest on it).
+    """
+    return tuple(f + gain * (x - f) for f, x in zip(previous, sample))
+
+
 # ------------------------------------------------------- control law  [9]
 def fls_inputs(error, reference, modified, fls_input: int) -> tuple:
     """The FLS input vector: E = (E, dE, ...) (fls_input 1) or the state
@@ -362,7 +417,7 @@ def controller_parameters(values, error0=None, t0: float = 0.0) -> dict:
 
     ``values`` maps the FMU's parameter names (order, sets, variant,
     fls_input, k1.., q1.., kappa1.., E1.., lambda_e, lambda_ce, mf_slope,
-    gamma, gamma_w, m_theta, delta, theta0) to values; ``error0`` is the
+    gamma, gamma_w, m_theta, delta, theta0; alpha_min, default 0) to values; ``error0`` is the
     latched (e(t0), de(t0), ...) (first n entries used; default zeros).
     Adds the vectors of the first n entries (k, q, kappa, universe), the
     membership boundaries, P B and the Remark 3 coefficients.
@@ -377,6 +432,7 @@ def controller_parameters(values, error0=None, t0: float = 0.0) -> dict:
     p["boundaries"] = tuple(membership_boundaries(e, m) for e in p["universe"])
     p["rules"] = m ** n
     p["unit_alpha"] = (1.0,) * n
+    p["alpha_min"] = float(values.get("alpha_min", 0.0))  # the floor [23a]; 0 = off
     p["p_b"] = tuple(row[n - 1] for row in lyapunov_p(p["k"], p["q"]))
     error0 = tuple(error0[:n]) if error0 is not None else ()
     latch_error(p, error0 + (0.0,) * (n - len(error0)), t0)
@@ -405,6 +461,8 @@ def controller_output(error, reference, t, theta, w_hat, p) -> tuple:
     variant = p["variant"]
     if variant == VARIANT_VUD:
         alpha = contraction_factors(x, p["lambda_ce"], p["kappa"])
+        if p["alpha_min"] > 0.0:  # the floor [23a], off at 0
+            alpha = floored_contraction_factors(alpha, p["alpha_min"])
     else:
         alpha = p["unit_alpha"]
     z = normalized_inputs(x, alpha, p["universe"])

@@ -40,10 +40,14 @@ void chatter_warning(const ChatterMonitor *state, double step_size, char *messag
     snprintf(message, size,
              "u chatters with communication step %g s: over the last ~%g s it varies like a %.4g Hz sine "
              "(total variation %.4g/s, mean |u| %.4g): over the %g Hz threshold (converged loops stay below "
-             "%g Hz), so the results are not the controller's. Use a smaller step (largest validated for a host "
-             "that delays every link, Jacobi: %g s for the paper's pendulum scenarios, %g s for the manipulator), "
-             "or a master that respects direct feedthrough (u depends directly on e, de, ym, dym: set them, then "
-             "read u, at the same communication point)",
+             "%g Hz), so the results are not the controller's. If e, de are exact (a simulation without a sensor): "
+             "the step is too large for the loop; use a smaller step (largest validated for a host that delays "
+             "every link, Jacobi: %g s for the paper's pendulum scenarios, %g s for the manipulator), or a master "
+             "that respects direct feedthrough (u depends directly on e, de, ym, dym: set them, then read u, at the "
+             "same communication point). If e, de are measured (sensor noise, quantisation, a sample-and-hold or a "
+             "delay, as on a rig): a smaller step does not help, the variable universe magnifies what the "
+             "measurement adds by up to 1 / (1 - lambda_ce) near zero error; try the robust cures (alpha_min, "
+             "dead_zone, sigma, filter_time_constant; docs/model.md section 14) or fixed universes (variant 2 or 3)",
              step_size, CHATTER_AVERAGING_TIME, chatter_frequency(state), state->variation_rate, state->magnitude,
              CHATTER_THRESHOLD_HZ, CHATTER_CONVERGED_HZ, 6.4e-5, 3.2e-5);  /* chatter_monitor.py's JACOBI_VALIDATED_STEP */
 }

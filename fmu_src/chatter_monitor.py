@@ -92,6 +92,11 @@ def warning(state: list, step_size: float) -> str:
     return (f"u chatters with communication step {step_size:g} s: over the last ~{AVERAGING_TIME:g} s it varies "
             f"like a {frequency(state):.4g} Hz sine (total variation {state[VARIATION_RATE]:.4g}/s, mean |u| "
             f"{state[MAGNITUDE]:.4g}): over the {THRESHOLD_HZ:g} Hz threshold (converged loops stay below "
-            f"{CONVERGED_HZ:g} Hz), so the results are not the controller's. Use a smaller step (largest validated for a host that delays every link, "
-            f"Jacobi: {validated}), or a master that respects direct feedthrough (u depends directly on e, "
-            f"de, ym, dym: set them, then read u, at the same communication point)")
+            f"{CONVERGED_HZ:g} Hz), so the results are not the controller's. If e, de are exact (a simulation "
+            f"without a sensor): the step is too large for the loop; use a smaller step (largest validated for a "
+            f"host that delays every link, Jacobi: {validated}), or a master that respects direct feedthrough (u "
+            f"depends directly on e, de, ym, dym: set them, then read u, at the same communication point). If e, de "
+            f"are measured (sensor noise, quantisation, a sample-and-hold or a delay, as on a rig): a smaller step "
+            f"does not help, the variable universe magnifies what the measurement adds by up to 1 / (1 - lambda_ce) "
+            f"near zero error; try the robust cures (alpha_min, dead_zone, sigma, filter_time_constant; "
+            f"docs/model.md section 14) or fixed universes (variant 2 or 3)")

@@ -20,7 +20,7 @@ from harness.fmu_build import toolchain as c_toolchain
 
 ENVIRONMENT_SWITCH = "AFC_MASTER_LOOP"  # "python": always the Python loop; "c": the compiled one or an error
 CHOICES = ("auto", "python", "c")
-_NO_COMPILER = "zig's C compiler is not installed (pip install -e '.[native]')"
+_NO_COMPILER = "zig's C compiler is not installed (pip install -e .)"
 _LOCAL_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.MULTILINE)
 
 

@@ -20,11 +20,27 @@ SCORE_KEYS = ("ts", "es1_pct", "es2_pct", "ITAE", "IAE", "Ec", "umax", "tv_u")
 REFERENCE_PERIOD = 2 * math.pi  # of ym = A sin t, every scenario's reference: the window of es1, es2
 PERIOD_SCORES = ("es1_pct", "es2_pct")  # taken over the last reference period [T - 2 pi, T]
 SETTLING_BAND = 0.05  # ts: |e| within 5 % of max|ym| (docs/model.md section 10, choice 13 (settling time))
+#: ts: |e| must stay inside the band for at least this long before the stop time, one period of the
+#: reference ym = A sin t, so that every phase of the motion is tracked inside the band (choice 13)
+SETTLING_DWELL = REFERENCE_PERIOD
 NOT_SETTLED = "not settled"
+
+
+def dwell_text(dwell: float | None = None) -> str:
+    """The settling dwell for people: "one reference period (2 pi s)" or its length in seconds."""
+    dwell = SETTLING_DWELL if dwell is None else dwell
+    return "one reference period (2 pi s)" if math.isclose(dwell, REFERENCE_PERIOD) else f"{dwell:.6g} s"
+
+
+def settling_text() -> str:
+    """How ts is read (the constants SETTLING_BAND and SETTLING_DWELL, choice 13), for reports."""
+    return (f"ts is the earliest time after which |e| <= {100 * SETTLING_BAND:g} % of max|ym| until the stop time T, "
+            f"provided that leaves at least {dwell_text()} inside the band; else the run is *not settled within "
+            "the horizon*")
 #: what each score is, for reports (docs/model.md section 9 (scores)); units: harness/units.py score_units
 DEFINITIONS = {
-    "ts": "settling time: the earliest time after which |e| <= 5 % of max|ym| until the stop time T "
-          "(not settled: no such time)",
+    "ts": f"settling time: the earliest time after which |e| <= {100 * SETTLING_BAND:g} % of max|ym| until the stop "
+          f"time T, provided that leaves at least {dwell_text()} inside the band (not settled: no such time)",
     "es1_pct": "steady-state error of e: 100 max|e| / max|ym| over the last reference period [T - 2 pi, T]",
     "es2_pct": "steady-state error of de: 100 max|de| / max|dym| over the same window",
     "ITAE": "integral of t ||e|| dt over [0, T], ||e|| = sqrt(e^2 + de^2 (+ d2e^2 for order 3)), its terms "
@@ -55,8 +71,8 @@ def why_none(metric: str, start: float, stop: float) -> str:
     if reason is not None:
         return reason
     if metric == "ts":
-        return (f"|e| is outside the {100 * SETTLING_BAND:g} % band of max|ym| at the stop time {stop:g} s, "
-                "or enters it only at the last step")
+        return (f"|e| does not stay inside the {100 * SETTLING_BAND:g} % band of max|ym| for {dwell_text()} "
+                f"before the stop time {stop:g} s")
     return "the run gave no value"
 
 
@@ -94,22 +110,23 @@ def control_energy(time, u) -> float:
     return trapezoid(u * u, time)
 
 
-def settling_time(time, e, ym, fraction: float = SETTLING_BAND) -> float | None:
-    """ts: the earliest time after which |e| <= fraction * max|ym| until T
-    (docs/model.md section 10, choice 13 (settling time)).
+def settling_time(time, e, ym, fraction: float = SETTLING_BAND, dwell: float = SETTLING_DWELL) -> float | None:
+    """ts: the earliest time after which |e| <= fraction * max|ym| until T, when |e| then stays inside
+    the band for at least ``dwell`` (docs/model.md section 10, choice 13 (settling time)).
 
-    The start time if |e| stays inside the band from the start; None (not settled) if |e| is
-    outside the band at the last sample or enters it only there: the run shows no time after
-    which the error stays small.
+    The start time if |e| stays inside the band from the start (and the horizon is at least ``dwell``);
+    None (not settled within the horizon) if the error enters the band for the last time less than
+    ``dwell`` before T, or at the last sample only: the run shows no time after which the error stays
+    small for a whole reference period.
     """
     band = fraction * float(np.max(np.abs(ym)))
     outside = np.flatnonzero(np.abs(e) > band)
-    if outside.size == 0:
-        return float(time[0])
-    last = outside[-1]
-    if last + 2 >= len(time):  # outside at the last sample, or inside at the last sample only
+    settled = 0 if outside.size == 0 else outside[-1] + 1
+    if settled + 1 >= len(time):  # outside at the last sample, or inside at the last sample only
         return None
-    return float(time[last + 1])
+    if time[-1] - time[settled] < dwell * (1 - 1e-12):  # inside the band for less than the dwell
+        return None
+    return float(time[settled])
 
 
 def steady_state_errors(time, e, de, ym, dym, period: float = REFERENCE_PERIOD) -> tuple:

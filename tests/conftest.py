@@ -37,7 +37,8 @@ SLOW = {
         "test_the_project_keeps_its_import_architecture",),
     "test_bench.py": ("test_bench_json_reports_every_figure_and_times_the_right_runs",
         "test_the_main_job_is_timed_as_a_user_runs_it",),
-    "test_build_native.py": ("test_every_binary_exports_the_whole_fmi_api_and_nothing_else",
+    "test_build_native.py": ("test_the_controllers_signals_declare_the_plants_quantities_in_both_editions_and_fmi_versions",
+        "test_every_binary_exports_the_whole_fmi_api_and_nothing_else",
         "test_invalid_parameters_and_inputs_get_the_python_editions_messages",
         "test_libcosim_runs_the_native_fmus_from_the_exported_ssp_as_the_python_ones",
         "test_the_editions_agree_on_every_table_case", "test_the_fmi3_controller_matches_the_fmi2_one",
@@ -70,7 +71,11 @@ SLOW = {
         "test_the_directory_validates_clean_with_fmpys_cross_check_validator",
         "test_the_files_keep_the_layouts_limits_and_name_only_the_fmus_variables",
         "test_the_validation_sees_a_broken_file",),
+    "test_cures.py": ("test_with_the_cures_off_every_shipped_scenario_records_what_it_did_before_them",),
     "test_dc_motor_arm.py": ("test_master_run_matches_the_closed_loop_written_from_the_equations",),
+    "test_continuous_reference.py": EVERY_TEST,
+    "test_default_tolerance.py": ("test_plant_in_fmpys_model_exchange_with_its_declared_tolerance_is_within_a_thousandth",
+        "test_controller_in_fmpys_model_exchange_with_its_declared_tolerance_is_within_a_thousandth",),
     "test_determinism.py": EVERY_TEST,
     "test_divergence.py": EVERY_TEST,
     "test_docs_data.py": ("test_table_rows_in_the_docs_are_those_the_tables_command_prints",
@@ -79,6 +84,7 @@ SLOW = {
         "test_the_model_exchange_verdicts_quoted_are_those_tables_me_decides",
         "test_the_readmes_verdicts_are_what_the_claims_code_decides",
         "test_the_runs_the_docs_count_are_those_the_tables_command_makes",),
+    "test_error_bars.py": EVERY_TEST,
     "test_engines.py": ("test_a_host_that_is_not_python_needs_libpython_preloaded",
         "test_a_model_exchange_package_declares_omsimulators_cvode_for_every_component",
         "test_ecos_and_our_jacobi_master_agree_inside_the_tube_and_to_rounding",
@@ -99,7 +105,9 @@ SLOW = {
         "test_a_batch_whose_worker_dies_is_split_and_only_its_culprit_is_lost",),
     "test_extras.py": ("test_a_command_that_needs_a_missing_extra_says_which_in_one_line",
         "test_the_host_matrix_skips_a_host_whose_extra_is_missing_and_says_so",
-        "test_the_main_job_runs_on_the_core_install_alone",),
+        "test_the_main_job_runs_on_the_core_install_alone_in_the_compiled_loop",
+        "test_without_the_compiler_the_master_falls_back_to_its_python_loop",),
+    "test_fast_loop.py": ("test_every_suite_run_prints_the_fast_loops_slowest_tests_before_the_summary_line",),
     "test_fmi_rules.py": ("test_a_fixed_parameter_is_accepted_after_instantiation_and_in_initialisation_mode",
         "test_a_fixed_parameter_written_after_initialisation_is_refused_and_keeps_its_value",),
     "test_fmu_bad_inputs.py": ("test_every_invalid_parameter_fails_initialisation_naming_it_its_value_and_range",
@@ -119,7 +127,9 @@ SLOW = {
     "test_hardware_scenario.py": ("test_neutral_hardware_gives_todays_records_bit_for_bit",
         "test_a_jacobi_host_gets_the_hardwares_warning_and_a_feedthrough_master_none",),
     "test_hardware_study.py": ("test_the_committed_csv_is_what_the_command_computes",
-        "test_a_short_run_of_the_command_writes_its_csv_and_section",),
+        "test_a_short_run_of_the_command_writes_its_csv_and_section",
+        "test_the_committed_cures_csv_is_what_the_command_computes",
+        "test_a_short_run_of_the_cures_writes_its_csv_and_section",),
     "test_host_robustness.py": ("test_chatter_in_jacobi_warns_once", "test_no_warning_in_our_masters_converged_runs",
         "test_pinned_e0_de0_set_the_modified_error", "test_pinned_initial_error_is_used_without_warning",
         "test_plain_gauss_seidel_in_every_order_gets_the_converged_result",
@@ -132,7 +142,8 @@ SLOW = {
         "test_two_loops_in_one_master_equal_each_loop_alone",),
     "test_loop_interface.py": ("test_a_changed_header_makes_another_library",
         "test_a_header_out_of_step_with_python_is_found", "test_the_python_layouts_and_codes_are_the_headers",),
-    "test_master.py": ("test_cosimulation_matches_the_oracle",
+    "test_master.py": ("test_console_script_and_module_entry_point_run",
+        "test_cosimulation_matches_the_oracle",
         "test_csv_is_in_cross_check_style_and_thinned_on_request",
         "test_default_has_no_delay_and_jacobi_delays_each_connection_one_step",
         "test_divergence_stops_with_message_and_partial_result",
@@ -143,7 +154,8 @@ SLOW = {
         "test_native_fmus_give_bit_identical_runs_with_either_loop",
         "test_progress_is_reported_at_the_same_rows_with_either_loop",
         "test_pythonfmu_fmus_give_bit_identical_runs_with_either_loop",),
-    "test_ls_ref.py": ("test_native_fmu_reproduces_its_embedded_reference",
+    "test_ls_ref.py": ("test_stored_experiments_are_compats",
+        "test_native_fmu_reproduces_its_embedded_reference",
         "test_python_fmu_reproduces_its_embedded_reference",),
     "test_matrix.py": ("test_chattering_rows_carry_the_step_warning_and_others_do_not",
         "test_every_host_at_its_validated_step_is_within_1_percent_without_false_warning",
@@ -151,7 +163,7 @@ SLOW = {
         "test_the_matrix_compares_hosts_that_agree_with_each_other",
         "test_the_native_edition_gives_every_host_the_same_rows_and_warnings",),
     "test_me_accuracy.py": ("test_the_page_says_what_it_measured",
-        "test_the_stuck_link_chatters_in_co_simulation_and_rests_in_model_exchange",
+        "test_the_stuck_link_chatters_in_co_simulation_by_the_plant_step_against_the_step",
         "test_the_tolerance_ladder_converges_to_the_co_simulation_limit",),
     "test_me_fmpy_agreement.py": EVERY_TEST,
     "test_me_master.py": ("test_a_value_beyond_its_bound_stops_both_loops_alike",
@@ -160,7 +172,9 @@ SLOW = {
         "test_fmi3_gives_the_fmi2_trajectory", "test_python_and_compiled_loops_are_bit_identical",
         "test_run_reports_the_integrators_work", "test_the_model_exchange_master_runs_the_masters_life_cycle",
         "test_the_stuck_link_rests_at_exactly_zero_and_breaks_away",),
-    "test_memory_cycles.py": ("test_life_cycles_keep_no_more_than_pythonfmus_residual",),
+    "test_memory_cycles.py": ("test_our_code_keeps_next_to_nothing_per_cycle",
+                              "test_life_cycles_keep_no_more_than_pythonfmus_residual",
+                              "test_the_performance_page_quotes_the_figures_measured"),
     "test_model_exchange.py": ("test_every_numerical_initial_dependency_is_declared",
         "test_fmpy_simulates_the_controller_as_solve_ivp_integrates_the_adaptive_law",
         "test_fmpy_simulates_the_manipulator_through_its_friction_events_as_the_python_model",
@@ -177,7 +191,8 @@ SLOW = {
     "test_no_silent_changes.py": ("test_a_build_writes_a_temporary_file_beside_the_fmu_then_replaces_it",
         "test_a_failed_build_keeps_the_previous_fmu_and_leaves_no_temporary_file",
         "test_two_builds_at_once_leave_one_whole_fmu",),
-    "test_omsimulator.py": ("test_its_c_api_takes_the_step_from_the_package_and_matches_our_master",
+    "test_omsimulator.py": ("test_fmi3_co_simulation_runs_and_its_strongly_coupled_mode_refuses_it",
+        "test_its_c_api_takes_the_step_from_the_package_and_matches_our_master",
         "test_its_matrix_rows_are_within_1_percent_without_warnings", "test_its_python_api_reads_no_step_annotation",
         "test_nothing_is_printed_after_a_process_that_ran_it_ends",
         "test_its_strongly_coupled_mode_is_first_order_in_its_maximum_step",),
@@ -189,7 +204,10 @@ SLOW = {
         "test_gamma_290_instead_of_300_fails_and_the_unchanged_case_passes",
         "test_model_exchange_holds_to_references_of_its_own",
         "test_scaled_result_fails_and_changed_step_is_reported", "test_the_references_hold_for_the_native_edition",),
-    "test_regression_report.py": ("test_a_changed_controller_parameter_fails_and_the_junit_failure_names_the_signal",
+    "test_regression_report.py": ("test_report_md_shows_html_in_names_as_text_and_the_html_report_escapes_it",
+        "test_junit_with_update_and_a_file_as_references_are_usage_errors",
+        "test_the_first_update_creates_the_references_with_the_scenarios_hash",
+        "test_a_changed_controller_parameter_fails_and_the_junit_failure_names_the_signal",
         "test_a_mistake_in_the_metadata_tolerances_is_one_line_exit_2", "test_a_plain_run_passes_and_writes_junit",
         "test_a_run_more_than_twice_as_slow_as_its_reference_is_flagged",
         "test_an_edited_scenario_file_is_detected_by_its_hash_and_the_change_is_named",
@@ -198,7 +216,9 @@ SLOW = {
         "test_per_signal_tolerances_in_the_reference_metadata_decide_each_signal",
         "test_the_html_report_shows_failing_signals_first_with_their_plots_and_every_link_resolves",
         "test_the_link_check_sees_a_missing_image",),
-    "test_source_fmus.py": ("test_fmi2_sources_rebuild_to_the_same_results",
+    "test_scenario_mistakes.py": ("test_a_broken_system_structure_is_one_line_naming_the_package",),
+    "test_source_fmus.py": ("test_source_fmus_validate",
+        "test_fmi2_sources_rebuild_to_the_same_results",
         "test_fmi3_build_description_rebuilds_to_the_same_results",),
     "test_step_study.py": ("test_apply_needs_the_full_study",
         "test_export_ssp_carries_the_jacobi_validated_step_unless_given",
@@ -220,14 +240,19 @@ SLOW = {
         "test_failed_points_are_recorded_and_the_sweep_goes_on",
         "test_local_pool_sweep_records_every_point_with_scores_or_a_reason",
         "test_unreachable_scheduler_is_a_clear_error",),
-    "test_tables.py": ("test_tables_in_model_exchange_decide_the_claims_on_tolerance_ladders",
+    "test_tables.py": ("test_the_native_ladders_give_the_pythonfmu_editions_scores",
+        "test_figures_define_the_controllers_and_draw_the_settling_band",
+        "test_tables_in_model_exchange_decide_the_claims_on_tolerance_ladders",
         "test_tables_writes_tables_report_and_figures",),
     "test_temp_cleanup.py": ("test_a_run_killed_with_sigkill_leaves_folders_the_next_run_removes",
         "test_an_ecos_run_leaves_nothing", "test_tables_stopped_while_its_workers_run_leaves_nothing",
         "test_fmus_extracted_once_per_process_are_shared_renewed_and_removed",
         "test_the_driven_helper_removes_its_extraction",),
-    "test_termination.py": ("test_sigkill_of_the_command_leaves_no_pool_worker_behind",),
-    "test_tune.py": ("test_a_best_that_moves_at_half_the_step_is_pruned_not_reported",
+    "test_termination.py": ("test_tables_under_a_pipe_on_a_loaded_cpu_says_how_far_within_10_s_and_sigterm_ends_it",
+        "test_a_signal_ends_the_pools_workers_and_what_they_started",
+        "test_sigkill_of_the_command_leaves_no_pool_worker_behind",),
+    "test_tune.py": ("test_a_database_another_process_is_creating_is_opened_once_it_is_there",
+        "test_a_best_that_moves_at_half_the_step_is_pruned_not_reported",
         "test_a_database_server_that_cannot_be_used_is_one_line_exit_2_before_any_trial",
         "test_a_full_disk_mid_study_is_one_line_naming_the_database_and_keeps_the_trials",
         "test_a_run_killed_mid_trial_is_resumed_by_another_through_its_heartbeat",
@@ -404,7 +429,32 @@ def pytest_sessionfinish(session):
         fmi.release_extractions()
 
 
+#: {test id: seconds of setup, call and teardown} of every test this session ran that is not marked slow
+_FAST_LOOP_SECONDS = {}
+#: how many of the fast loop's slowest tests the summary names (docs/ci.md: what belongs in the fast loop)
+FAST_LOOP_SHOWN = 10
+
+
+def pytest_runtest_logreport(report):
+    # under pytest-xdist the controller gets every worker's reports, with their keywords
+    if "slow" not in report.keywords:
+        _FAST_LOOP_SECONDS[report.nodeid] = _FAST_LOOP_SECONDS.get(report.nodeid, 0.0) + report.duration
+
+
+def fast_loop_summary(seconds: dict, shown: int = FAST_LOOP_SHOWN) -> list:
+    """The lines that name the fast loop's slowest tests: the whole suite's run shows what the fast loop costs."""
+    if not seconds:
+        return []
+    slowest = sorted(seconds.items(), key=lambda item: -item[1])[:shown]
+    lines = [f"the fast loop (-m 'not slow'): {len(seconds)} tests, {sum(seconds.values()):.1f} s of test time "
+             f"in all (its serial wall time, FMU builds included); its {len(slowest)} slowest:"]
+    lines += [f"  {duration:7.2f} s  {test_id}" for test_id, duration in slowest]
+    return lines
+
+
 def pytest_terminal_summary(terminalreporter):
+    for line in fast_loop_summary(_FAST_LOOP_SECONDS):
+        terminalreporter.write_line(line)
     folder = tempfile.gettempdir()
     left = sorted(name for name in set(os.listdir(folder)) - _TEMP_BEFORE if not name.startswith("pytest-of-"))
     if left:

@@ -53,7 +53,7 @@ def qemu_program() -> str | None:
 
 pytestmark = [
     pytest.mark.skipif(not build_native.compiler_available(),
-                       reason="zig's C compiler is not installed (pip install -e '.[native]')"),
+                       reason="zig's C compiler is not installed (pip install -e .)"),
     pytest.mark.skipif(qemu_program() is None or not (SYSROOT / "lib" / "ld-linux-aarch64.so.1").exists(),
                        reason=f"qemu-user or the arm64 glibc in {SYSROOT} is not installed "
                               "(apt-get install qemu-user libc6-arm64-cross)"),

@@ -12,7 +12,7 @@ import pytest
 
 from harness.fmu_build import native as build_native
 from harness.fmu_build.native_stages import compiler
-from fmu_src import afc_math
+from fmu_src import afc_math, chatter_monitor
 from harness import variants
 
 MAX_ORDER = 4
@@ -31,7 +31,7 @@ class ControllerParameters(ctypes.Structure):
                 ("boundaries", Boundaries), ("p_b", ctypes.c_double * MAX_ORDER),
                 ("error0", ctypes.c_double * MAX_ORDER), ("t0", ctypes.c_double), ("remark3", Matrix),
                 ("order", ctypes.c_int), ("sets", ctypes.c_int), ("rules", ctypes.c_int),
-                ("variant", ctypes.c_int), ("fls_input", ctypes.c_int)]
+                ("variant", ctypes.c_int), ("fls_input", ctypes.c_int), ("alpha_min", ctypes.c_double)]
 
 pytestmark = [
     pytest.mark.skipif(not build_native.compiler_available(), reason="zig's C compiler is not installed"),
@@ -65,6 +65,12 @@ SIGNATURES = {  # name: (restype, argtypes)
     "contraction_factors": (None, [ctypes.c_int, double_p, ctypes.c_double, double_p, double_p]),
     "normalized_inputs": (None, [ctypes.c_int, double_p, double_p, double_p, double_p]),
     "latch_error": (None, [ctypes.POINTER(ControllerParameters), double_p, ctypes.c_double]),
+    "floored_contraction_factors": (None, [ctypes.c_int, double_p, ctypes.c_double, double_p]),
+    "dead_zone_signal": (ctypes.c_double, [ctypes.c_double] * 2),
+    "leaky_weights": (None, [ctypes.c_int, double_p, double_p, ctypes.c_double, ctypes.c_double, double_p]),
+    "leaky_rates": (None, [ctypes.c_int, double_p, double_p, ctypes.c_double, double_p]),
+    "measurement_filter_gain": (ctypes.c_double, [ctypes.c_double] * 2),
+    "filtered_measurements": (None, [ctypes.c_int, double_p, double_p, ctypes.c_double, double_p]),
     "controller_output": (ctypes.c_double, [double_p, double_p, ctypes.c_double, double_p, ctypes.c_double,
                                             ctypes.POINTER(ControllerParameters), double_p, double_p, double_p]),
 }
@@ -275,6 +281,8 @@ def test_the_chatter_monitor_reads_a_sines_frequency_and_warns_once_above_20_hz(
         message = ctypes.create_string_buffer(2048)
         afc.chatter_warning(ctypes.byref(state), ctypes.c_double(h), message, 2048)
         assert message.value.decode().startswith("u chatters with communication step 0.0001 s: over the last ~1 s")
+        twin = [getattr(state, name) for name, _ in Chatter._fields_]  # chatter_monitor.py's layout
+        assert message.value.decode() == chatter_monitor.warning(twin, h)  # word for word
 
 
 # ------------------------------------- every C function against its Python twin, bit for bit
@@ -445,7 +453,7 @@ def c_parameters(p):
     fields are left to the C latch_error)."""
     c = ControllerParameters(lambda_e=p["lambda_e"], lambda_ce=p["lambda_ce"], mf_slope=p["mf_slope"],
                              order=p["order"], sets=p["sets"], rules=p["rules"], variant=p["variant"],
-                             fls_input=p["fls_input"])
+                             fls_input=p["fls_input"], alpha_min=p["alpha_min"])
     n = p["order"]
     c.kappa[:n], c.universe[:n], c.p_b[:n] = p["kappa"], p["universe"], p["p_b"]
     c.boundaries = c_boundary_table(p["boundaries"])
@@ -528,3 +536,52 @@ def test_the_native_controller_fmu_is_the_python_one_at_any_order(fmu_paths, nat
             c.free()
     assert traces[0] == traces[1]
     assert traces[0][-1] != traces[0][1]  # theta learned
+
+
+def test_the_robust_cures_are_the_python_ones(afc):
+    """floored_contraction_factors (23a), dead_zone_signal (31a), leaky_weights and leaky_rates (31b),
+    measurement_filter_gain and filtered_measurements (F1), bit for bit; docs/model.md section 14 (robust cures)."""
+    rng = random.Random(1414)
+    for _ in range(200):
+        n = rng.randint(1, MAX_ORDER)
+        alpha = [rng.uniform(0.0, 1.0) for _ in range(n)]
+        floor = rng.choice([0.0, rng.uniform(0.0, 1.0), 1.0])
+        out = vector([0.0] * n)
+        afc.floored_contraction_factors(n, vector(alpha), floor, out)
+        assert bits(out[:n]) == bits(afc_math.floored_contraction_factors(tuple(alpha), floor))
+        tau, width = rng.uniform(-2.0, 2.0), rng.choice([0.0, rng.uniform(0.0, 1.5)])
+        assert bits(afc.dead_zone_signal(tau, width)) == bits(afc_math.dead_zone_signal(tau, width))
+        rules = rng.randint(1, 30)
+        theta = [rng.uniform(-250.0, 250.0) for _ in range(rules)]
+        rates = [rng.uniform(-50.0, 50.0) for _ in range(rules)]
+        sigma, h = rng.uniform(0.0, 5.0), rng.uniform(1e-5, 1e-2)
+        out = vector([0.0] * rules, rules)
+        afc.leaky_weights(rules, vector(theta, rules), vector(rates, rules), sigma, h, out)
+        assert bits(out[:rules]) == bits(afc_math.leaky_weights(theta, rates, sigma, h))
+        afc.leaky_rates(rules, vector(theta, rules), vector(rates, rules), sigma, out)
+        assert bits(out[:rules]) == bits(afc_math.leaky_rates(theta, rates, sigma))
+        elapsed, time_constant = rng.uniform(0.0, 0.01), rng.uniform(1e-4, 1.0)
+        gain = afc.measurement_filter_gain(elapsed, time_constant)
+        assert bits(gain) == bits(afc_math.measurement_filter_gain(elapsed, time_constant))
+        previous, sample = [rng.uniform(-1, 1) for _ in range(n)], [rng.uniform(-1, 1) for _ in range(n)]
+        out = vector([0.0] * n)
+        afc.filtered_measurements(n, vector(previous), vector(sample), gain, out)
+        assert bits(out[:n]) == bits(afc_math.filtered_measurements(previous, sample, gain))
+
+
+def test_the_control_law_with_a_floor_on_alpha_is_the_python_one(afc):
+    """controller_output with alpha_min > 0 (23a): u, E, alpha, xi bit for bit, alpha never below the floor."""
+    rng = random.Random(2323)
+    values = parameter_values(alpha_min=0.2, kappa1=10.0, kappa2=3.0)
+    p = afc_math.controller_parameters(values, (0.1, -0.2), 0.0)
+    c = c_parameters(p)
+    afc.latch_error(ctypes.byref(c), vector(p["error0"]), 0.0)
+    for _ in range(100):
+        error, reference = [rng.uniform(-1, 1) for _ in range(2)], [rng.uniform(-1, 1) for _ in range(2)]
+        theta, t = [rng.uniform(-10, 10) for _ in range(4)], rng.uniform(0.0, 3.0)
+        modified, alpha, xi = vector([0.0] * 2), vector([0.0] * 2), vector([0.0] * 4)
+        u = afc.controller_output(vector(error), vector(reference), t, vector(theta), 0.0, ctypes.byref(c), modified,
+                                  alpha, xi)
+        expected = afc_math.controller_output(tuple(error), tuple(reference), t, theta, 0.0, p)
+        assert bits(u) == bits(expected[0]) and bits(alpha[:2]) == bits(expected[2]) and min(alpha[:2]) >= 0.2
+        assert bits(xi[:4]) == bits(expected[3])

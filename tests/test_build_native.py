@@ -34,7 +34,7 @@ CPU_ARM64 = 0x0100000C
 PE_AMD64 = 0x8664
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
-                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                reason="zig's C compiler is not installed (pip install -e .)")
 
 
 @pytest.fixture(scope="session")

@@ -50,7 +50,7 @@ def wine_program() -> str | None:
 
 pytestmark = [
     pytest.mark.skipif(not build_native.compiler_available(),
-                       reason="zig's C compiler is not installed (pip install -e '.[native]')"),
+                       reason="zig's C compiler is not installed (pip install -e .)"),
     pytest.mark.skipif(wine_program() is None,
                        reason="wine is not installed (apt-get install --no-install-recommends wine64)"),
 ]

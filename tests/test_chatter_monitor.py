@@ -55,3 +55,14 @@ def test_warning_names_step_validated_steps_and_remedy():
     for step in chatter.JACOBI_VALIDATED_STEP.values():
         assert f"{step:g} s" in text
     assert "smaller step" in text and "direct feedthrough" in text
+
+
+def test_warning_says_what_to_try_with_exact_and_with_measured_inputs():
+    """Chatter from a too-large step and chatter from sensor noise need different cures: the message names
+    both cases, each with its own remedies (a smaller step does not cure measured noise)."""
+    text = chatter.warning(feed([(-1.0) ** k for k in range(5000)], 1e-3)[0], 1e-3)
+    exact, _, measured = text.partition("If e, de are measured")
+    assert "If e, de are exact" in exact and "smaller step" in exact and "direct feedthrough" in exact
+    assert "sensor noise" in measured and "a smaller step does not help" in measured
+    for cure in ("alpha_min", "dead_zone", "sigma", "filter_time_constant", "variant 2 or 3"):
+        assert cure in measured, cure

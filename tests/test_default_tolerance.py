@@ -20,7 +20,7 @@ from harness.fmu_build import native as build_native
 from tests.conftest import ROOT
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
-                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                reason="zig's C compiler is not installed (pip install -e .)")
 
 AGREEMENT = 1e-3  # of the converged co-simulation's range (and of the controller's u at the end)
 OUTPUT_INTERVAL = 1e-4  # s: fmpy's output interval = where it hands the inputs over

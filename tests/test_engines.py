@@ -265,7 +265,7 @@ def test_a_model_exchange_package_declares_omsimulators_cvode_for_every_componen
     from lxml import etree
 
     if not build_native.compiler_available():
-        pytest.skip("zig's C compiler is not installed (pip install -e '.[native]')")
+        pytest.skip("zig's C compiler is not installed (pip install -e .)")
     out = tmp_path / "me.ssp"
     assert cli_main(["export-ssp", "manipulator", "--edition", "native", "--algorithm", "me", "--rtol", "1e-9",
                      "--stop", "0.1", "--out", str(out)]) == 0

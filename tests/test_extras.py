@@ -1,6 +1,7 @@
 """What an install pulls in: the core install (`pip install -e .`) is what the main job
-and the FMUs need; the host studies, the cluster, the native edition and the tests are extras, and a
-command that needs a missing extra says which, in one line.
+and the FMUs need, zig's C compiler included (the master's compiled loop and the native edition); the host
+studies, the cluster, tune, PostgreSQL and the tests are extras, and a command that needs a missing extra
+says which, in one line.
 
 "Not installed" is simulated in a child process: a sitecustomize.py on PYTHONPATH sets
 ``sys.modules[name] = None`` for each package named in AFC_TEST_UNINSTALLED, so importing it fails
@@ -24,7 +25,7 @@ except ModuleNotFoundError:  # Python 3.10
 ROOT = Path(__file__).resolve().parents[1]
 PROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
 #: import names of every package only an extra brings (pytest: this test runs under it, but no command may need it)
-EXTRA_MODULES = ("ecospy", "libcosimpy", "fmu_manipulation_toolbox", "dask", "distributed", "ziglang", "scipy", "lief",
+EXTRA_MODULES = ("ecospy", "libcosimpy", "fmu_manipulation_toolbox", "dask", "distributed", "scipy", "lief",
                  "SALib", "pytest")
 
 
@@ -34,18 +35,18 @@ def names(requirements) -> set:
 
 def test_the_core_install_is_what_the_main_job_and_the_fmus_need():
     core = names(PROJECT["dependencies"])
-    assert core == {"fmpy", "pythonfmu", "numpy", "tqdm", "matplotlib", "pyfunnel", "tomli"}, core
+    assert core == {"fmpy", "pythonfmu", "numpy", "tqdm", "matplotlib", "pyfunnel", "ziglang", "tomli"}, core
     extras = {extra: names(requirements) for extra, requirements in PROJECT["optional-dependencies"].items()}
     assert extras["hosts"] == {"ecospy", "tbb", "libcosimpy", "fmu-manipulation-toolbox"}
-    assert extras["native"] == {"ziglang"} and extras["cluster"] == {"dask"}
+    assert "native" not in extras and extras["cluster"] == {"dask"}
     assert extras["robustness"] == {"scipy", "salib"}
     assert {"pytest", "scipy", "lief"} <= extras["test"]
-    # the suite runs every study: the test extra brings every other extra (as itself: afc-fmi[hosts,native,cluster])
+    # the suite runs every study: the test extra brings every other extra (as itself: afc-fmi[hosts,cluster,...])
     test_with = next(r for r in PROJECT["optional-dependencies"]["test"] if r.startswith(PROJECT["name"] + "["))
-    assert {"hosts", "native", "cluster", "robustness"} <= set(test_with.split("[", 1)[1].rstrip("]").split(","))
+    assert {"hosts", "cluster", "tune", "postgres", "robustness"} <= set(test_with.split("[", 1)[1].rstrip("]").split(","))
 
 
-def uninstalled(tmp_path, packages, *argv, timeout=600) -> subprocess.CompletedProcess:
+def uninstalled(tmp_path, packages, *argv, timeout=600, env=None) -> subprocess.CompletedProcess:
     """``python -m harness ARGV`` (or ``python ARGV`` for a .py) as if ``packages`` were not installed."""
     folder = tmp_path / "uninstalled"
     folder.mkdir(exist_ok=True)
@@ -54,19 +55,29 @@ def uninstalled(tmp_path, packages, *argv, timeout=600) -> subprocess.CompletedP
         "for _name in filter(None, os.environ.get('AFC_TEST_UNINSTALLED', '').split(',')):\n"
         "    sys.modules[_name] = None\n")
     environment = {**os.environ, "PYTHONPATH": os.pathsep.join([str(folder), str(ROOT)]),
-                   "AFC_TEST_UNINSTALLED": ",".join(packages)}
+                   "AFC_TEST_UNINSTALLED": ",".join(packages), **(env or {})}
     environment.pop("AFC_EDITION", None)
     command = [sys.executable, *argv] if argv[0].endswith(".py") else [sys.executable, "-m", "harness", *argv]
     return subprocess.run(command, cwd=tmp_path, env=environment, capture_output=True, text=True, timeout=timeout)
 
 
-def test_the_main_job_runs_on_the_core_install_alone(fmu_paths, tmp_path):
+def test_the_main_job_runs_on_the_core_install_alone_in_the_compiled_loop(fmu_paths, tmp_path):
+    # AFC_MASTER_LOOP=c: a run that would fall back to the master's Python loop fails instead
+    compiled = {"AFC_MASTER_LOOP": "c"}
     done = uninstalled(tmp_path, EXTRA_MODULES, "tables", "--stop", "0.05", "--refine", "0", "--jobs", "1",
-                       "--out", str(tmp_path / "results"))
+                       "--out", str(tmp_path / "results"), env=compiled)
     assert done.returncode == 0, done.stderr[-2000:]
     assert (tmp_path / "results" / "report.md").is_file() and "Traceback" not in done.stderr
-    run = uninstalled(tmp_path, EXTRA_MODULES, "run", "pendulum_case1", "--stop", "0.05", "--json")
+    run = uninstalled(tmp_path, EXTRA_MODULES, "run", "pendulum_case1", "--stop", "0.05", "--json", env=compiled)
     assert run.returncode == 0 and '"ITAE"' in run.stdout, run.stderr
+
+
+def test_without_the_compiler_the_master_falls_back_to_its_python_loop(fmu_paths, tmp_path):
+    run = uninstalled(tmp_path, (*EXTRA_MODULES, "ziglang"), "run", "pendulum_case1", "--stop", "0.05", "--json")
+    assert run.returncode == 0 and '"ITAE"' in run.stdout, run.stderr
+    refused = uninstalled(tmp_path, (*EXTRA_MODULES, "ziglang"), "run", "pendulum_case1", "--stop", "0.05",
+                          env={"AFC_MASTER_LOOP": "c"})
+    assert refused.returncode != 0 and "pip install -e ." in refused.stderr, refused.stderr
 
 
 @pytest.fixture(scope="module")
@@ -93,7 +104,7 @@ def ssp_package(fmu_paths, tmp_path_factory):
     ("mutate without pytest", ("pytest",), ("mutate", "--only", "theta_euler_sign"), "test"),
     ("robustness without SALib", ("SALib",), ("robustness", "pendulum_case1", "--samples", "2", "--param",
                                               "plant.mp=uniform:0.1:1", "--out", "{tmp}/robustness"), "robustness"),
-    ("the native build without zig", ("ziglang",), ("build_fmu.py", "--edition", "native"), "native"),
+    ("the native build without zig", ("ziglang",), ("build_fmu.py", "--edition", "native"), None),
 ])
 def test_a_command_that_needs_a_missing_extra_says_which_in_one_line(fmu_paths, ssp_package, tmp_path, what, packages,
                                                                       argv, extra):
@@ -104,7 +115,9 @@ def test_a_command_that_needs_a_missing_extra_says_which_in_one_line(fmu_paths, 
     errors = [line for line in done.stderr.splitlines() if "error" in line.lower()]
     assert done.returncode != 0, f"{what}: exit 0\n{done.stdout}{done.stderr}"
     assert len(errors) == 1 and "Traceback" not in done.stderr, f"{what}:\n{done.stderr}"
-    assert f"pip install -e '.[{extra}]'" in errors[0], f"{what}: {errors[0]}"
+    # zig's compiler is of the core install: reinstalling the project brings it back
+    hint = "pip install -e ." if extra is None else f"pip install -e '.[{extra}]'"
+    assert hint in errors[0], f"{what}: {errors[0]}"
 
 
 def test_the_host_matrix_skips_a_host_whose_extra_is_missing_and_says_so(fmu_paths, tmp_path):

@@ -150,3 +150,35 @@ def test_ci_requires_the_servers_the_tests_start(monkeypatch):
             outcomes.append((type(outcome), str(outcome)))
     assert outcomes == [(pytest.fail.Exception, "no server; AFC_REQUIRE_SERVERS=1 (.ci/run) requires it"),
                         (pytest.skip.Exception, "no server")]
+
+
+def test_the_summary_names_the_slowest_tests_that_are_not_marked_slow():
+    seconds = {f"tests/test_x.py::test_{n}": float(n) for n in range(1, 13)}
+    lines = conftest.fast_loop_summary(seconds, shown=3)
+    assert lines[0].startswith("the fast loop (-m 'not slow'): 12 tests, 78.0 s of test time"), lines[0]
+    assert [line.split()[-1] for line in lines[1:]] == [f"tests/test_x.py::test_{n}" for n in (12, 11, 10)]
+    assert conftest.fast_loop_summary({}) == []
+
+
+def test_only_the_reports_of_tests_not_marked_slow_are_counted(monkeypatch):
+    from types import SimpleNamespace
+
+    monkeypatch.setattr(conftest, "_FAST_LOOP_SECONDS", {})
+    for when, duration in (("setup", 1.0), ("call", 2.0), ("teardown", 0.5)):
+        conftest.pytest_runtest_logreport(SimpleNamespace(nodeid="a", keywords={"a": 1}, when=when, duration=duration))
+        conftest.pytest_runtest_logreport(SimpleNamespace(nodeid="b", keywords={"slow": 1}, when=when, duration=9.0))
+    assert conftest._FAST_LOOP_SECONDS == {"a": 3.5}
+
+
+def test_every_suite_run_prints_the_fast_loops_slowest_tests_before_the_summary_line():
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(Path(__file__)),
+                           "-k", "every_module_keeps_a_fast_test or test_the_summary_names"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    lines = done.stdout.splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("the fast loop (-m 'not slow'): 2 tests"))
+    assert "test_every_module_keeps_a_fast_test" in "\n".join(lines[header + 1:header + 3])
+    assert " passed" in lines[-1] and header < len(lines) - 1

@@ -18,19 +18,25 @@ def test_help_counts_the_runs_tables_makes(monkeypatch, tmp_path, capsys):
     """--help said "12 co-simulations" and README 32: the help now counts from the cases the command builds."""
     assert cli_main(["--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
-    found = re.search(r"tables run Table I/II and write the report: (\d+) co-simulations in one pool \(the (\d+) "
-                      r"cases at their step and at half of it, (\d+) of the third-order plant", text)
+    found = re.search(r"tables run Table I/II and write the report: (\d+) co-simulations first \(the (\d+) "
+                      r"cases at their step, at half of it and, where the plant switches, at their step with another "
+                      r"plant step, (\d+) of the third-order plant", text)
     assert found, text
     pooled, paper, beyond = map(int, found.groups())
     seen = []
 
     def first_pool(cases, **options):
         seen.extend(cases)
+        if options.get("fmu_paths") is not None:  # the ladders' own runs on the native FMUs: the tables' runs follow
+            return [None] * len(cases)
         raise Stop()
 
     monkeypatch.setattr(tables, "run_cases", first_pool)
     assert cli_main(["tables", "--out", str(tmp_path / "out")]) == 1  # Stop: one line, exit 1
-    assert len(seen) == pooled == 2 * paper + beyond
+    from harness.studies import ladders
+
+    switching = sum(ladders.plant_step_case(case) is not None for case in seen if case.figure_interval)  # plant axis
+    assert len(seen) == pooled == 2 * paper + switching + beyond and switching == 3
     assert sum(dict(case.overrides).get("controller.sets") is not None for case in seen) == beyond
 
 

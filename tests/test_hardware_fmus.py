@@ -36,7 +36,7 @@ from tests.fmu_helpers import Driven
 CHANNELS = ("y", "dy", "d2y", "d3y")
 MEASURED = tuple(f"{c}_measured" for c in CHANNELS)
 needs_native = pytest.mark.skipif(not build_native.compiler_available(),
-                                  reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                  reason="zig's C compiler is not installed (pip install -e .)")
 
 
 # ------------------------------------------------------------------ pure functions

@@ -108,3 +108,83 @@ def test_a_short_run_of_the_command_writes_its_csv_and_section(tmp_path, capsys)
     assert len(rows) == 48 and all(r["status"] == "ok" for r in rows)
     assert (tmp_path / "hardware_study.md").read_text().startswith(hardware.BEGIN)
     assert cli_main(["hardware", "--stop", "0.05", "--apply", "--out", str(tmp_path)]) == 2  # not from short runs
+
+
+# ------------------------------------------------------------------ the robust cures (--cures)
+from harness.studies import hardware_cures  # noqa: E402
+
+
+def test_the_cures_rules_follow_the_rigs_data_sheet_and_the_controller():
+    """Each rule's value from its formula (harness/studies/hardware_cures.py), so a changed rig or design
+    moves it: the pendulum's floor is its gyro's noise rule, the manipulator's its step rule."""
+    pendulum = hardware_cures.rule_values("pendulum_case2_hardware")
+    table = scenarios.load("pendulum_case2_hardware").hardware
+    sigma_dy = math.sqrt(table["noise_dy"] ** 2 + table["quantum_dy"] ** 2 / 12)
+    assert pendulum["alpha_min"] == pytest.approx(3 * 7.0 * sigma_dy)  # 3 s sigma beats (1 - 0.99) 1 ms / 0.4 ms
+    sigma_y = table["quantum_y"] / math.sqrt(12)
+    assert pendulum["dead_zone"] == pytest.approx(3 * math.hypot(5.0 * sigma_y, 5.0 * sigma_dy))  # P B = (5, 5)
+    assert pendulum["sigma"] == pytest.approx(1 / (2 * math.pi)) and pendulum["filter_time_constant"] == 0.1
+    manipulator = hardware_cures.rule_values("manipulator_hardware")
+    assert manipulator["alpha_min"] == pytest.approx((1 - 0.995) * 1e-3 / 5e-5)  # the step rule beats 3 s sigma
+    assert hardware_cures.cure_values("manipulator_hardware", "alpha_floor", 30.0) == {"alpha_min": 1.0}
+    assert set(hardware_cures.cure_values("pendulum_case2_hardware", "floor+dead_zone", 3.0)) == {"alpha_min",
+                                                                                                  "dead_zone"}
+
+
+def test_every_cure_at_every_scale_is_run_with_the_three_controllers():
+    work = hardware_cures.items()
+    per_scenario = 2 * (3 + len(hardware_cures.CURES) * len(hardware_cures.SCALES))
+    assert len(work) == len(hardware.HARDWARE_SCENARIOS) * per_scenario
+    assert {(item[2], item[3]) for item in work} >= {("fae", ""), ("vud", "sigma"), ("vud", "floor+dead_zone")}
+
+
+def test_the_cures_section_of_the_studies_page_is_rendered_from_the_committed_csv():
+    page = hardware.STUDIES_PAGE.read_text()
+    generated = re.search(re.escape(hardware_cures.BEGIN) + ".*?" + re.escape(hardware_cures.END), page, re.S)
+    rows = hardware.read_csv(hardware_cures.DOCS_CSV)
+    assert generated.group(0) == hardware_cures.section(rows), \
+        "run: python -m harness hardware --cures --edition native --apply"
+    assert [(r["scenario"], r["setting"], r["controller"], r["cure"], float(r["scale"])) for r in rows] == \
+        [item[:5] for item in hardware_cures.items()]
+    assert all(r["status"] == "ok" for r in rows if not r["cure"])  # the three controllers all finish
+
+
+def test_the_cures_findings_follow_the_numbers():
+    """The paragraph names the cure that restores the advantage when the rows say one does."""
+    rows = [dict(r) for r in hardware.read_csv(hardware_cures.DOCS_CSV)]
+    name = hardware.HARDWARE_SCENARIOS[0]
+    assert "no cure restores" in hardware_cures._findings(rows, name)
+    for row in rows:
+        if (row["scenario"], row["setting"], row["cure"], row["scale"]) == (name, "rig", "sigma", "3.0"):
+            row["ITAE"] = "1e-3"
+    changed = hardware_cures._findings(rows, name)
+    assert "sigma at x3 the rule: it restores vud's tracking advantage over fae" in changed
+
+
+def test_the_committed_cures_csv_is_what_the_command_computes(tmp_path):
+    """A full run of the cures' study (native edition) gives the committed CSV's numbers."""
+    pytest.importorskip("ziglang", reason="the native edition needs zig's C compiler (pip install -e '.[test]')")
+    completed = subprocess.run([sys.executable, "-m", "harness", "hardware", "--cures", "--edition", "native", "--jobs",
+                                "2", "--no-progress", "--out", str(tmp_path)], cwd=ROOT, capture_output=True, text=True,
+                               timeout=3600)
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    fresh = hardware.read_csv(tmp_path / "hardware_cures.csv")
+    committed = hardware.read_csv(hardware_cures.DOCS_CSV)
+    assert len(fresh) == len(committed)
+    for new, old in zip(fresh, committed):
+        for key in hardware_cures.COLUMNS:
+            if old[key] and re.fullmatch(r"-?[\d.]+(e-?\d+)?", old[key]):
+                assert math.isclose(float(new[key]), float(old[key]), rel_tol=1e-6, abs_tol=1e-12), \
+                    (old["scenario"], old["setting"], old["cure"], old["scale"], key, new[key], old[key])
+            else:
+                assert new[key] == old[key], (old["scenario"], old["setting"], old["cure"], old["scale"], key)
+
+
+def test_a_short_run_of_the_cures_writes_its_csv_and_section(tmp_path, capsys):
+    assert cli_main(["hardware", "--cures", "--edition", "native", "--stop", "0.05", "--jobs", "2", "--no-progress",
+                     "--out", str(tmp_path)]) == 0
+    assert "112 runs" in capsys.readouterr().out
+    assert (tmp_path / "hardware_cures.md").read_text().startswith(hardware_cures.BEGIN)
+    assert len(hardware.read_csv(tmp_path / "hardware_cures.csv")) == 112
+    assert cli_main(["hardware", "--cures", "--stop", "0.05", "--apply", "--out", str(tmp_path)]) == 2
+    assert cli_main(["hardware", "--cures", "--out", "docs", "--stop", "0.01"]) == 2  # a tracked output

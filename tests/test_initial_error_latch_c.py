@@ -18,7 +18,7 @@ from harness.fmu_build.native_stages import compiler
 from fmu_src import initial_error_latch as latch_py
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
-                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                reason="zig's C compiler is not installed (pip install -e .)")
 
 MAX_ORDER = 4
 NAMES = ("e", "de", "d2e", "d3e")

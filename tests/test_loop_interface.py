@@ -27,7 +27,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
-                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                reason="zig's C compiler is not installed (pip install -e .)")
 
 ROOT = Path(__file__).resolve().parents[1]
 CODE_PREFIXES = ("LOOP_", "ACTION_")

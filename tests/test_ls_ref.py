@@ -22,7 +22,7 @@ MODELS = [row.model_identifier for row in fmu_catalog.FMUS]
 NATIVE = [m.model_identifier for m in build_native.models()]
 
 needs_zig = pytest.mark.skipif(not build_native.compiler_available(),
-                               reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                               reason="zig's C compiler is not installed (pip install -e .)")
 
 
 @pytest.fixture(scope="module")
@@ -108,3 +108,10 @@ def test_a_new_fmus_first_build_leaves_fmi_ls_ref_out_and_says_so(monkeypatch, c
     note = capsys.readouterr().err
     assert note.startswith("note: Sensor: no FMI-LS-REF experiment stored yet") and "--fmu Sensor" in note
     assert build_fmu.ls_ref_model("InvertedPendulum") == "InvertedPendulum" and not capsys.readouterr().err
+
+
+def test_a_scenario_that_sets_only_the_fmus_numerical_settings_keeps_its_place():
+    """manipulator.toml sets the plant's max_internal_step (a numerical setting, not the model): it stays the
+    Manipulator's experiment scenario ahead of manipulator_hardware, whose plant keeps every default."""
+    assert compat._choose_scenario("Manipulator") == ("manipulator", "plant")
+    assert compat._choose_scenario("InvertedPendulum") == ("pendulum_case1", "plant")

@@ -25,7 +25,7 @@ from harness.loop_interface import ACTION_READ, ACTION_WRITE, Action, LoopOutcom
 from harness.master import Master, SimulationFailed
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
-                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                reason="zig's C compiler is not installed (pip install -e .)")
 
 GET2 = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint), ctypes.c_size_t,
                         ctypes.POINTER(ctypes.c_double))

@@ -30,7 +30,7 @@ from harness.fmi import MODEL_EXCHANGE, ModelInfo
 from harness.me_master import ModelExchangeMaster
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
-                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                reason="zig's C compiler is not installed (pip install -e .)")
 
 GRIDS = (1e-4, 2.5e-5)  # s: our master's output grid = fmpy's output interval = the input CSV's rows
 #: (scenario, instance, horizon, outputs compared, largest difference at the finer grid relative to the range:

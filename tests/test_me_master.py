@@ -24,7 +24,7 @@ from harness.me_master import ModelExchangeMaster, check_tolerances
 from harness.scenario import ScenarioError
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
-                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                reason="zig's C compiler is not installed (pip install -e .)")
 
 
 @pytest.fixture(scope="module")

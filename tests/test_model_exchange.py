@@ -43,7 +43,7 @@ VERSIONS = [2, 3]
 FMUCHECK = ROOT.parent / "shared" / "tools" / "fmucheck" / "fmucheck.sh"
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
-                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                reason="zig's C compiler is not installed (pip install -e .)")
 
 
 @pytest.fixture(scope="module")

@@ -151,3 +151,15 @@ def test_nothing_is_printed_after_a_process_that_ran_it_ends(oms, tmp_path):
     output = completed.stdout
     assert "refused: Failed to add oms_addSubModel" in output
     assert output.rstrip().endswith("THE END"), output[output.find("THE END"):]
+
+
+def test_its_result_file_is_read_by_column_suffix_keeping_the_last_row_of_each_time(tmp_path):
+    """OMSimulator writes a row before and one after each communication point: the later one is the step's."""
+    path = tmp_path / "result.csv"
+    path.write_text("time,model.root.plant.y,model.root.controller.u\n"
+                    "0,1.0,10\n0.5,2.0,20\n0.5,3.0,30\n1,4.0,40\n")
+    time, columns = omsimulator.read_result(path, ["plant.y", "controller.u"])
+    assert time.tolist() == [0.0, 0.5, 1.0]
+    assert columns["plant.y"].tolist() == [1.0, 3.0, 4.0] and columns["controller.u"].tolist() == [10, 30, 40]
+    with pytest.raises(RuntimeError, match="no column for reference.ym"):
+        omsimulator.read_result(path, ["reference.ym"])

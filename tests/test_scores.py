@@ -37,8 +37,27 @@ def test_settling_time_edge_cases():
     assert scores.settling_time(TIME, late, ym) is None
     last_only = np.where(TIME < T, 1.0, 0.0)  # inside at the last sample only: no time it stays inside
     assert scores.settling_time(TIME, last_only, ym) is None
-    two_last = np.where(TIME < TIME[-2], 1.0, 0.0)  # inside over the last step: settled there
-    assert scores.settling_time(TIME, two_last, ym) == TIME[-2]
+    two_last = np.where(TIME < TIME[-2], 1.0, 0.0)  # inside over the last step only: shorter than the dwell
+    assert scores.settling_time(TIME, two_last, ym) is None
+    assert scores.settling_time(TIME, two_last, ym, dwell=0.0) == TIME[-2]  # no dwell: settled over that step
+
+
+@pytest.mark.parametrize("dwell", [2 * math.pi, 1.5, 4.0])
+def test_settling_needs_the_error_to_stay_in_the_band_for_the_dwell(dwell):
+    """ts counts only when |e| stays inside the band for at least the dwell (one reference period by default)
+    before the stop time: entering it just before T is not settling."""
+    ym = np.sin(TIME)
+    for enters in (T - dwell - 0.01, T - dwell + 0.01):
+        e = np.where(TIME < enters, 1.0, 0.0)
+        found = scores.settling_time(TIME, e, ym, dwell=dwell)
+        if enters <= T - dwell:
+            assert found == pytest.approx(enters, abs=2 * (TIME[1] - TIME[0])), (dwell, enters)
+        else:
+            assert found is None, (dwell, enters, found)
+    assert scores.SETTLING_DWELL == scores.REFERENCE_PERIOD
+    e = np.where(TIME < T - 0.57, 1.0, 0.0)  # enters 0.57 s before the end: not settled with the default dwell
+    assert scores.settling_time(TIME, e, ym) is None and scores.score(
+        TIME, e, np.zeros_like(TIME), ym, np.cos(TIME), TIME)["ts"] is None
 
 
 def test_whether_a_score_is_defined_is_decided_in_one_place():
@@ -51,8 +70,8 @@ def test_whether_a_score_is_defined_is_decided_in_one_place():
     result = scores.score(short, np.ones_like(short), np.ones_like(short), np.sin(short), np.cos(short), short)
     assert result["es1_pct"] is None and result["es2_pct"] is None and result["ts"] is None
     assert all(isinstance(result[m], float) for m in ("ITAE", "IAE", "Ec", "umax", "tv_u"))
-    assert scores.why_none("ts", 0.0, 0.3) == ("|e| is outside the 5 % band of max|ym| at the stop time 0.3 s, or "
-                                               "enters it only at the last step")
+    assert scores.why_none("ts", 0.0, 0.3) == ("|e| does not stay inside the 5 % band of max|ym| for one reference "
+                                               "period (2 pi s) before the stop time 0.3 s")
     assert [scores.value_text(m, result[m], 0.0, 0.3) for m in ("ts", "es1_pct", "Ec")] == [
         "not settled", "n/a", format(result["Ec"], ".6g")]
 

@@ -30,7 +30,7 @@ STOP, STEP = 0.2, 1e-3  # s: a short run of each FMU on smooth inputs
 
 pytestmark = [
     pytest.mark.skipif(not build_native.compiler_available(),
-                       reason="zig's C compiler is not installed (pip install -e '.[native]')"),
+                       reason="zig's C compiler is not installed (pip install -e .)"),
     pytest.mark.skipif(shutil.which("cmake") is None or shutil.which("cc") is None,
                        reason="rebuilding a source FMU needs CMake and a C compiler (cc)"),
 ]

@@ -11,7 +11,7 @@ from harness import cli
 from harness.studies import work_precision as wp
 
 pytestmark = pytest.mark.skipif(not build_native.compiler_available(),
-                                reason="zig's C compiler is not installed (pip install -e '.[native]')")
+                                reason="zig's C compiler is not installed (pip install -e .)")
 
 
 def point(series, cpu, error, step=1e-4, rtol=None):

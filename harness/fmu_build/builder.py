@@ -204,10 +204,10 @@ def main(argv=None) -> int:
     if "native" in editions:
         if not build_native.compiler_available():
             if args.edition == "native":
-                print("error: the native edition needs zig's C compiler: pip install -e '.[native]'", file=sys.stderr)
+                print("error: the native edition needs zig's C compiler: pip install -e .", file=sys.stderr)
                 return 1
             editions.remove("native")
-            print("note: native edition skipped (no C compiler): pip install -e '.[native]' to build it")
+            print("note: native edition skipped (no C compiler): pip install -e . to build it")
     for edition in editions:
         try:
             built = ensure_built(force=args.force, verbose=True, edition=edition)

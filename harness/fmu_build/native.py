@@ -166,7 +166,7 @@ def ensure_built(platforms=None, force: bool = False, verbose: bool = False, job
     """
     if not compiler_available():
         raise NativeBuildError("the native edition needs zig's C compiler: pip install ziglang "
-                               "(or pip install -e '.[native]')")
+                               "(or pip install -e .)")
     platforms = chosen_platforms(platforms)
     zig_version = None
     result = {}

@@ -1,4 +1,4 @@
-"""The C toolchain: zig's C compiler from the ziglang wheel (``pip install -e '.[native]'``).
+"""The C toolchain: zig's C compiler from the ziglang wheel (``pip install -e .``).
 
 Used by the native edition's build (harness/fmu_build/native.py: the FMUs' shared libraries for every
 platform) and, through :func:`host_library`, by the master's compiled loop (harness/master_loop.py)
@@ -106,7 +106,7 @@ def host_library(name: str, sources, headers=()) -> Path:
         return library
     if not compiler_available():
         raise NativeBuildError(f"building {name} needs zig's C compiler: pip install ziglang "
-                               "(or pip install -e '.[native]')")
+                               "(or pip install -e .)")
     arguments = ["cc", *(["-target", target] if target else []), "-shared", "-fPIC", *flags,
                  "-o", "{output}", *map(str, sources), "-lm"]
     return compile_cached(library, library.name, arguments, name)

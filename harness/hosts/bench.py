@@ -279,7 +279,7 @@ def bench(scenario_name="pendulum_case1", controller=variants.PROPOSED, stop=2.0
         libcosim_python = with_algorithm(package, folder / "libcosim_python", scenario.step, workers=0)
         measurements = {}
         if native is None:
-            notes["native_feedthrough"] = notes["libcosim_native"] = "no C compiler: pip install -e '.[native]'"
+            notes["native_feedthrough"] = notes["libcosim_native"] = "no C compiler: pip install -e ."
         else:
             native_package = ssp.export_ssp(scenario, folder / f"{scenario.name}_native.ssp", fmu_paths=native)
             libcosim_native = with_algorithm(native_package, folder / "libcosim_native", scenario.step, workers=0)

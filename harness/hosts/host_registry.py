@@ -51,7 +51,7 @@ def host_available(host: Host) -> str | None:
     if host.unavailable is not None and host.unavailable():
         return host.unavailable()
     if host.edition == "native" and not build_native.compiler_available():
-        return "it runs the native edition's FMUs, and zig's C compiler is not installed (pip install -e '.[native]')"
+        return "it runs the native edition's FMUs, and zig's C compiler is not installed (pip install -e .)"
     return None
 
 

@@ -1,14 +1,37 @@
 """The paper's claims on the scores of docs/model.md section 9 (scores), each decided only where the
 numbers can carry it.
 
-Every score comes from a step ladder: the same co-simulation at the communication
-step h and at h/2 (and finer where a comparison needs it).  A score's value is
-the one at the finest step run and its numerical error is the change of that
-score over the last halving, ``|s(h') - s(h'/2)|``.  The co-simulation is first
-order in the step (u held over each step, theta by explicit Euler: the step
-ladders of docs/convergence.md halve their changes per halving), so that change
-estimates the error left in the finer value.  ``ts`` is quantised to the
-communication grid: its error is at least the step of its run.
+Every score comes from a ladder of runs of the same case that refines what its error depends on
+(docs/verification.md): the communication step h and the plant's internal RK4 step h_p.
+
+* the communication axis: the case at h and at h/2 with the plant's internal step halved with it
+  (the same h_p / h), and finer where a comparison needs it (``--refine``);
+* the plant axis: the case at h with the plant's internal step halved (h_p / 2), which shows what the
+  plant's fixed-step integration leaves in the score (the Coulomb friction's stuck phases: RK4 of
+  sgn(x2) is only first order in h_p there, and their chatter is set by h_p / h, not by h).
+
+A score's value is the one at the finest communication step run and its numerical error, an
+estimate of its distance to the continuous-time value of the model, is
+
+    SAFETY_FACTOR x (communication change + plant error)
+
+* the communication change: ``|s(h') - s(h'/2)|`` over the last halving (the sampled-data loop is first
+  order in the step: u held, theta by explicit Euler, so the change estimates the error left in the
+  finer value); with three or more halvings the ladder must show convergence (the last change smaller
+  than the one before, the error then scaled by their ratio q as ``q / (1 - q)`` when q > 1/2),
+  otherwise the error is infinite: *undecided at this step*;
+* the plant error: the value's plant step is the table run's h_p / h (the communication axis keeps it), and
+  the plant axis runs the case at h with another plant step h_p' (2 h_p where h holds two plant steps or
+  more, else h_p / 2): a first-order integration leaves ``|s(h, h_p) - s(h, h_p')| h_p / |h_p' - h_p|`` at
+  h_p (the change itself from 2 h_p, twice the change to h_p / 2; RK4 is first order where the Coulomb
+  friction switches, so this bounds it).  A smooth plant (rows with ``plant_axis`` False) has no plant
+  axis and no plant error of its own: RK4 is fourth order in h_p there and the communication axis, which
+  halves h_p with h, counts it (harness/studies/ladders.py);
+* SAFETY_FACTOR: the factor of safety of Roache's grid convergence index for a ladder of a known order.
+
+``ts`` is quantised to the communication grid: its error is at least the step of its run, and its
+changes are steps of the grid, so only its last halving counts (no convergence test).  A ladder that
+needs the plant axis and has no run on it (or whose needed run failed) has an infinite error.
 
 A comparison "vud below other" is decided only when the gap exceeds the combined
 error (the sum of both errors: discretisation errors are systematic, not random,
@@ -26,8 +49,10 @@ finer step could decide, for the claims whose verdict is still open.
 A comparison decided by a gap of less than ``CLOSE_MARGIN`` of the values (e.g. 0.02 %) is
 numerically sound but says *close*, and a claim that such comparisons decide says so beside its
 verdict.  A score a run cannot give (harness/scores.py: es1, es2 on a horizon shorter than one
-reference period, ts of a run that has not settled) decides nothing: the comparison is open,
-with the reason, and no finer step is asked for it.
+reference period) decides nothing: the comparison is open, with the reason, and no finer step is
+asked for it.  A run that has not settled within its horizon (ts None: the error does not stay in
+the band for one reference period before T) settles later than any run that has: its ts counts as
+beyond the horizon, so a settled vud is below it and two unsettled runs are not decided.
 """
 from __future__ import annotations
 
@@ -35,7 +60,7 @@ import math
 from dataclasses import dataclass, field
 
 from .. import variants
-from ..scores import why_none
+from ..scores import SETTLING_DWELL, why_none
 
 REPRODUCED = "reproduced"
 NOT_REPRODUCED = "not reproduced"
@@ -48,6 +73,10 @@ ALL_SCENARIOS = (*PENDULUM, "manipulator")
 DISTURBANCE_TOLERANCE = 0.10  # "barely changes": ITAE and IAE within 10 % of case 1
 SMOOTHNESS_TOLERANCE = 1.10  # "smooth": tv_u at most 10 % above the smoothest comparison controller
 GRID_QUANTISED = ("ts",)  # scores read off the communication grid: error at least one step
+#: the factor of safety of Roache's grid convergence index for a ladder of a known order (first)
+SAFETY_FACTOR = 1.25
+#: relative slack when matching steps and plant-step ratios of the runs of one ladder
+STEP_MATCH = 1e-6
 TOLERANCE_FACTOR = 10.0  # --algorithm me: the ladder's rungs are rtol and 10 rtol (no step to halve)
 CLOSE_MARGIN = 0.01  # a comparison decided by a gap under 1 % of the values is reported as close
 
@@ -56,17 +85,25 @@ BELOW, ABOVE, OPEN = "below", "above", "open"
 
 @dataclass(frozen=True)
 class Estimate:
-    """A score at the finest step run, with its numerical error."""
+    """A score at the finest step run, with its numerical error (its distance to the continuous-time value)."""
 
     value: float
-    error: float  # math.inf when there is no finer/coarser pair to compare
+    error: float  # math.inf when the ladder cannot bound it (``note`` says why)
     step: float
+    plant_step: float | None = None  # the plant's internal RK4 step of the run the value comes from
+    note: str = ""  # why the error is infinite: the ladder shows no convergence, a run is missing
 
     def scaled(self, factor: float) -> "Estimate":
-        return Estimate(factor * self.value, abs(factor) * self.error, self.step)
+        return Estimate(factor * self.value, abs(factor) * self.error, self.step, self.plant_step, self.note)
 
     def text(self) -> str:
+        if self.value == math.inf:
+            return "not settled within the horizon"
         return plus_minus(self.value, self.error)
+
+    def where(self) -> str:
+        """``h = 2.5e-05 s, plant step 3.12e-06 s``: the run the value comes from."""
+        return f"h = {self.step:g} s" + (f", plant step {self.plant_step:.3g} s" if self.plant_step else "")
 
 
 def plus_minus(value: float, error: float) -> str:
@@ -81,24 +118,42 @@ def plus_minus(value: float, error: float) -> str:
     return f"{value:.{decimals}f} ± {error:.2g}"
 
 
-def estimate(ladder: list, metric: str) -> Estimate | None:
-    """The score ``metric`` of one (scenario, controller) from its runs at halving steps (or, Model
-    Exchange rows with an ``rtol``, at tolerances TOLERANCE_FACTOR apart).
+def _same(a: float, b: float) -> bool:
+    return math.isclose(a, b, rel_tol=STEP_MATCH)
 
-    ``ladder`` holds outcome rows (``step``, ``status`` and the scores), in any order.
-    None when the finest run failed; an infinite error when it has no coarser ok
-    neighbour at twice its step.
-    """
-    tolerances = bool(ladder) and all(o.get("rtol") for o in ladder)  # a Model Exchange ladder (--algorithm me)
-    runs = sorted(ladder, key=lambda o: o["rtol"] if tolerances else o["step"])
-    if not runs or runs[0]["status"] != "ok" or runs[0].get(metric) is None:
-        return None
+
+def _ratio(row: dict) -> float | None:
+    """h_p / h of a co-simulation run (None when the run does not say its plant step)."""
+    return row["plant_step"] / row["step"] if row.get("plant_step") else None
+
+
+def communication_error(values: list) -> tuple[float, str]:
+    """(the error left in the last of ``values``, a note when the chain shows no convergence): the values of
+    one case at halving steps, coarsest first (see the module's doc)."""
+    if len(values) < 2:
+        return math.inf, "no run at half the step"
+    last = abs(values[-1] - values[-2])
+    if len(values) == 2:
+        return last, ""
+    previous = abs(values[-2] - values[-3])
+    if last == 0.0:
+        return 0.0, ""
+    if last >= previous:
+        return math.inf, (f"no convergence shown: the last halving changed it by {last:.2g}, the one before by "
+                          f"{previous:.2g}")
+    q = last / previous
+    return last * max(1.0, q / (1.0 - q)), ""
+
+
+def _tolerance_estimate(runs: list, metric: str) -> Estimate | None:
+    """Model Exchange rows (each with an ``rtol``): the tightest run, its error the change from a
+    TOLERANCE_FACTOR looser one."""
+    runs = sorted(runs, key=lambda o: o["rtol"])
     finest = runs[0]
-    if tolerances:  # the same run at a TOLERANCE_FACTOR looser rtol: its change bounds the error left
-        coarser = next((o for o in runs[1:] if math.isclose(o["rtol"], TOLERANCE_FACTOR * finest["rtol"],
-                                                            rel_tol=1e-9)), None)
-    else:
-        coarser = next((o for o in runs[1:] if math.isclose(o["step"], 2 * finest["step"], rel_tol=1e-9)), None)
+    if finest["status"] != "ok" or finest.get(metric) is None:
+        return None
+    coarser = next((o for o in runs[1:] if math.isclose(o["rtol"], TOLERANCE_FACTOR * finest["rtol"],
+                                                        rel_tol=1e-9)), None)
     if coarser is None or coarser["status"] != "ok" or coarser.get(metric) is None:
         error = math.inf
     else:
@@ -106,6 +161,77 @@ def estimate(ladder: list, metric: str) -> Estimate | None:
     if metric in GRID_QUANTISED:
         error = max(error, finest["step"])
     return Estimate(float(finest[metric]), error, float(finest["step"]))
+
+
+def estimate(ladder: list, metric: str) -> Estimate | None:
+    """The score ``metric`` of one (scenario, controller) from its ladder (see the module's doc), or (Model
+    Exchange rows with an ``rtol``) from its runs at tolerances TOLERANCE_FACTOR apart.
+
+    ``ladder`` holds outcome rows (``step``, ``plant_step``, ``status`` and the scores), in any order.
+    None when the finest run failed or gives no value; an infinite error (with its note) when the ladder
+    cannot bound it.  A ts the finest run does not reach (not settled within the horizon) is +inf.
+    """
+    if not ladder:
+        return None
+    if all(o.get("rtol") for o in ladder):  # a Model Exchange ladder (--algorithm me)
+        return _tolerance_estimate(ladder, metric)
+    runs = sorted(ladder, key=lambda o: (-o["step"], -(o.get("plant_step") or 0.0)))
+    finer_steps = [o for o in runs if o["step"] < runs[0]["step"] * (1 - STEP_MATCH)]
+    chain_ratio = _ratio(finer_steps[0]) if finer_steps else None  # h_p / h of the communication axis
+    top = [o for o in runs if _same(o["step"], runs[0]["step"])]
+    # the table's run: the coarsest step at the communication axis's h_p / h (the others there: the plant axis)
+    table = next((o for o in top if chain_ratio is not None and _ratio(o) is not None
+                  and _same(_ratio(o), chain_ratio)), top[0])
+    chain = [o for o in runs if _ratio(o) is None or _ratio(table) is None or _same(_ratio(o), _ratio(table))]
+    chain = [o for o in chain if o is table or o["step"] < table["step"] * (1 - STEP_MATCH)]
+    finest = chain[-1]
+    value = _value(finest, metric)
+    if value is None:
+        return None
+    plant_step = finest.get("plant_step")
+    if any(o["status"] != "ok" or _value(o, metric) is None for o in chain):
+        error, note = math.inf, "a run of the ladder failed or gives no value"
+    else:
+        values = [_value(o, metric) for o in chain]
+        if any(v == math.inf for v in values):
+            error, note = (0.0, "") if all(v == math.inf for v in values) else (
+                math.inf, "settles at one step of the ladder and not at another")
+        elif metric in GRID_QUANTISED:  # read off the grid: its changes are steps of the grid, not a series
+            error, note = communication_error(values[-2:])
+        else:
+            error, note = communication_error(values)
+    plant = [o for o in top if o is not table and _ratio(o) is not None and _ratio(table) is not None
+             and not _same(_ratio(o), _ratio(table))]
+    if not plant and not any(o.get("plant_axis", True) for o in ladder):
+        plant_error = 0.0  # a smooth plant: the communication axis counts its RK4 error (ladders.py)
+    elif not plant:
+        plant_error, note = math.inf, note or "no run at another plant step"
+    elif plant[0]["status"] != "ok" or _value(plant[0], metric) is None or _value(table, metric) is None:
+        plant_error, note = math.inf, note or "the run at another plant step failed or gives no value"
+    else:
+        other, own = _value(plant[0], metric), _value(table, metric)
+        change = 0.0 if other == own else abs(other - own)  # inf - inf: unsettled at both
+        if math.isnan(change) or (math.inf in (other, own) and other != own):
+            plant_error, note = math.inf, note or "settles at one plant step and not at the other"
+        else:  # first order in h_p: the error left at the table's h_p, from the change to the other h_p
+            plant_error = change * _ratio(table) / abs(_ratio(plant[0]) - _ratio(table))
+    error = SAFETY_FACTOR * (error + plant_error)
+    if value == math.inf:  # not settled within the horizon at every step of the ladder
+        error = 0.0 if math.isfinite(error) else error
+    elif metric in GRID_QUANTISED:
+        error = max(error, finest["step"])
+    return Estimate(float(value), error, float(finest["step"]), plant_step, note if not math.isfinite(error) else "")
+
+
+def _value(row: dict, metric: str):
+    """The row's score; a ts the run does not reach (not settled within its horizon, which could show it) is
+    +inf; None when the run failed or the horizon does not define the score."""
+    if row.get("status") != "ok":
+        return None
+    value = row.get(metric)
+    if value is None and metric == "ts" and row.get("stop", 0.0) - row.get("start", 0.0) >= SETTLING_DWELL:
+        return math.inf  # the horizon could have shown settling: the run settles later, if ever
+    return value
 
 
 def missing_reason(ladder: list, metric: str) -> str:
@@ -134,6 +260,15 @@ def compare(low: Estimate, high: Estimate) -> tuple[str, float, float]:
     if -gap > combined:
         return ABOVE, gap, combined
     return OPEN, gap, combined
+
+
+def gap_text(gap: float, combined: float, decided: bool, other: str) -> str:
+    """``gap 0.104 > error 0.0993``, or which run does not settle within the horizon (ts)."""
+    if math.isnan(gap):
+        return f"neither {PROPOSED} nor {other} settles within the horizon"
+    if math.isinf(gap):
+        return f"{other if gap > 0 else PROPOSED} does not settle within the horizon"
+    return f"gap {abs(gap):.3g} {'>' if decided else '<='} error {combined:.3g}"
 
 
 def combine(verdicts: list) -> str:
@@ -176,10 +311,13 @@ def _comparisons(name: str, metric: str, ladders: dict, factor: float = 1.0):
         relation = {BELOW: "below", ABOVE: "above", OPEN: "undecided"}[outcome]
         if outcome != OPEN:
             relation = f"just {relation} (close: by {100 * margin:.2g} %)" if is_close else f"clearly {relation}"
+        elif not math.isfinite(combined):  # a ladder that cannot bound its error: no verdict with a too-small one
+            notes = [e.note for e in (vud, limit) if e.note]
+            relation = "undecided at this step" + (f" ({'; '.join(dict.fromkeys(notes))})" if notes else "")
         scaled = f"{factor:g} x " if factor != 1.0 else ""
-        parts.append(f"{scaled}{other} {limit.text()} (h = {estimates[other].step:g} s; {PROPOSED} {relation}: "
-                     f"gap {abs(gap):.3g} {'>' if outcome != OPEN else '<='} error {combined:.3g})")
-        if outcome == OPEN:
+        parts.append(f"{scaled}{other} {limit.text()} ({estimates[other].where()}; {PROPOSED} {relation}: "
+                     f"{gap_text(gap, combined, outcome != OPEN, other)})")
+        if outcome == OPEN and not math.isnan(gap):  # two runs unsettled within the horizon: no step decides
             open_cases |= {(name, PROPOSED), (name, other)}
         if is_close:
             close[outcome] = close.get(outcome, []) + [f"{name} ({metric}: {PROPOSED} vs {scaled}{other} by "
@@ -192,7 +330,7 @@ def _comparisons(name: str, metric: str, ladders: dict, factor: float = 1.0):
             deciding = []
     else:
         verdict, deciding = UNDECIDED, []
-    line = f"{name}: {PROPOSED} {vud.text()} (h = {vud.step:g} s) vs " + ", ".join(parts) + f": {verdict}"
+    line = f"{name}: {PROPOSED} {vud.text()} ({vud.where()}) vs " + ", ".join(parts) + f": {verdict}"
     return verdict, line, open_cases, deciding
 
 
@@ -257,8 +395,9 @@ def disturbance_claim(ladders: dict) -> Claim:
 def claims_check(ladders: dict) -> list:
     """Every claim of the paper with its verdict, the numbers with their errors, and what is open.
 
-    ``ladders`` maps (scenario, controller) to that case's outcome rows at halving steps
-    (at least h and h/2 for an error; each row with ``step``, ``status`` and the scores).
+    ``ladders`` maps (scenario, controller) to that case's ladder rows (harness/studies/ladders.py: at least h,
+    h/2 and h with another plant step for a finite error; each row with ``step``, ``plant_step``, ``status`` and
+    the scores).
     """
     claims = [
         best_claim("The proposed AFC has the shortest settling time ts in all four scenarios",

@@ -68,6 +68,9 @@ ME_TOLERANCE = 1e-12  # CVode's relative tolerance for the Model Exchange re-sim
 CS_AGREEMENT = 1e-12
 #: scenarios tried, in order, for an FMU's experiment (the first that uses it with its defaults wins)
 PREFERRED_SCENARIOS = ("pendulum_case1", "manipulator", "motor_arm")
+#: the FMU's own numerical settings: a scenario that sets them still uses the model with its defaults (the
+#: experiment runs every parameter at its default anyway)
+NUMERICAL_SETTINGS = ("max_internal_step",)
 
 
 def tool_version() -> str:
@@ -109,7 +112,7 @@ class Experiment:
 
 def _choose_scenario(model: str) -> tuple[str, str]:
     """(scenario, instance) for an FMU: the first preferred scenario (then any) that has an instance of it,
-    preferring one whose instance keeps every parameter at its default."""
+    preferring one whose instance keeps every parameter but its numerical settings at its default."""
     names = list(PREFERRED_SCENARIOS) + [n for n in scenarios.scenario_names() if n not in PREFERRED_SCENARIOS]
     defaults = {v.name: v.start for v in fmu_catalog.model_class(model).VARIABLES}
     found = []
@@ -117,7 +120,8 @@ def _choose_scenario(model: str) -> tuple[str, str]:
         scenario = scenarios.load(name)
         for instance, spec in scenario.components.items():
             if spec.fmu == model:
-                found.append((name, instance, all(defaults.get(k) == v for k, v in spec.parameters.items())))
+                found.append((name, instance, all(defaults.get(k) == v for k, v in spec.parameters.items()
+                                                  if k not in NUMERICAL_SETTINGS)))
     if not found:
         raise RuntimeError(f"no scenario of harness/scenarios/ uses {model}; add one (docs/architecture.md)")
     return next(((n, i) for n, i, at_defaults in found if at_defaults), found[0][:2])
@@ -511,7 +515,7 @@ def compat(out: Path, editions=EDITIONS, models=None, jobs: int | None = None) -
 def compat_command(args) -> int:
     editions = EDITIONS if args.edition in (None, "all") else (args.edition,)
     if any(e != "python" for e in editions) and not build_native.compiler_available():
-        raise cli_args.UsageError("the native edition needs zig's C compiler: pip install -e '.[native]' "
+        raise cli_args.UsageError("the native edition needs zig's C compiler: pip install -e . "
                                   "(or --edition python)")
     if args.ls_ref_experiments:
         stored = write_ls_ref_experiments(args.fmu)

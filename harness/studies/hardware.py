@@ -279,6 +279,10 @@ def with_section(text: str, rows: list) -> str:
 def hardware_command(args) -> int:
     if args.apply and args.stop is not None:
         raise cli_args.UsageError("--apply writes the docs from the full runs: leave out --stop")
+    if args.cures:
+        from . import hardware_cures  # the cures' study builds on this module's settings
+
+        return hardware_cures.cures_command(args)
     out = Path(args.out or "results/hardware")
     cli_args.refuse_tracked([out / DOCS_CSV.name, out / "hardware_study.md"])
     cli_args.check_writable([out / DOCS_CSV.name, out / "hardware_study.md"])
@@ -309,4 +313,9 @@ def register(commands):
     parser.add_argument("--apply", action="store_true",
                         help="copy the CSV to docs/hardware_study.csv and the section into docs/studies.md")
     parser.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
+    parser.add_argument("--cures", action="store_true",
+                        help="instead: vud with each robust cure (alpha_min, dead_zone, sigma, filter_time_constant; "
+                             "docs/model.md section 14) at its rule's value times 0.1..10, with and without the rig, "
+                             "beside the three controllers (OUT/hardware_cures.csv and .md; --apply: "
+                             "docs/hardware_cures.csv and its section of docs/studies.md)")
     parser.set_defaults(handler=hardware_command)

@@ -3,8 +3,10 @@
 ``python -m harness tables [--out DIR] [--jobs N]`` runs the 12 co-simulations
 (4 scenarios x vud, fixed, fae) in parallel processes and writes table1.csv,
 table2.csv, report.md and figures like the paper's Figs. 4-8 to DIR.  It also
-runs each case at half its step (and, with ``--refine``, the cases an open claim
-needs finer still): harness/studies/claims.py decides the paper's claims on those ladders.
+runs each case at half its step (the plant's internal step halved with it) and at its
+step with another plant's internal step (and, with ``--refine``, the cases an open
+claim needs finer still; harness/studies/ladders.py): harness/studies/claims.py
+decides the paper's claims on those ladders.
 Beyond the paper, it runs the third-order plant (motor_arm x vud, fixed, fae x
 m = 2, 3 fuzzy sets) into table3_beyond_paper.csv and a section of report.md.
 The step study behind each scenario's step is harness/studies/step_study.py.
@@ -24,9 +26,10 @@ from .. import scenario as scenarios
 from ..cases import Case, default_jobs, run_cases
 from ..me_master import ALGORITHM as MODEL_EXCHANGE
 from ..me_master import DEFAULT_RTOL
-from ..scores import DEFINITIONS, SCORE_KEYS, SETTLING_BAND, undefined_reason, value_text, why_none
+from ..scores import DEFINITIONS, SCORE_KEYS, SETTLING_BAND, settling_text, undefined_reason, value_text, why_none
 from ..units import score_units, variable_unit, with_unit
 from . import claims as claims_module
+from .ladders import case_cost, finer_case, ladder_cases, ladder_row, native_ladder_fmus, plant_step, plant_step_case
 from .step_study import convergence_summary, load_convergence, validated_step
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -41,6 +44,10 @@ HEADINGS = {"ts": "ts", "es1_pct": "es1", "es2_pct": "es2", "ITAE": "ITAE", "IAE
             "tv_u": "TV(u)/s"}
 BEYOND_PAPER = "motor_arm"  # a third-order plant of our own (docs/general_order.md)
 BEYOND_PAPER_SETS = (2, 3)  # fuzzy sets per input: M = 8 and 27 rules at order 3
+#: the ladders' own runs: the tables' runs at h are their first rung
+LADDER_RUNGS = "h/2 and h with another plant step"
+#: where the pythonfmu tables run their ladders (harness/studies/ladders.py native_ladder_fmus)
+NATIVE_LADDER_WORDS = f"the ladders' runs at {LADDER_RUNGS} and finer on the native FMUs"
 
 
 # ------------------------------------------------------------------ tables
@@ -110,7 +117,10 @@ def step_note(rows: list, scenario: str) -> str:
         return (f"Model Exchange at rtol {tolerances}, on the output grid h = {step} s. The claims below read the "
                 "same scores at the tightest rtol run with their numerical error, so their values differ from "
                 "these in the digits that error covers.")
-    return (f"At the scenario's step h = {step} s. The claims below read the same scores at the finest step "
+    internal = sorted({row["plant_step"] for row in own if row.get("plant_step")})
+    plant = (f", the plant's RK4 in internal steps of {', '.join(f'{h:.3g}' for h in internal)} s" if internal
+             else "")
+    return (f"At the scenario's step h = {step} s{plant}. The claims below read the same scores at the finest step "
             "run (h/2 or finer) with their numerical error, so their values differ from these in the digits "
             "that error covers.")
 
@@ -131,7 +141,7 @@ def table_cases(stop=None, algorithm: str = "feedthrough", rtol: float | None = 
 def pool_counts() -> tuple:
     """(cases of Tables I/II, runs in the first pool, of them the third-order plant's): what ``--help`` says."""
     cases, extra = table_cases(), beyond_paper_cases()
-    return len(cases), 2 * len(cases) + len(extra), len(extra)
+    return len(cases), len(cases) + sum(len(ladder_cases(case)) for case in cases) + len(extra), len(extra)
 
 
 def beyond_paper_cases(stop=None, algorithm: str = "feedthrough", rtol: float | None = None) -> list:
@@ -220,13 +230,45 @@ def draw_figure(name: str, runs: list, plt):
     return fig
 
 
+def _seconds(value: float) -> str:
+    """A step for people: in ms, or in us below 0.1 ms."""
+    return f"{value * 1e3:.4g} ms" if value >= 1e-4 else f"{value * 1e6:.4g} us"
+
+
+def integration_text() -> str:
+    """How each scenario's plant is integrated (its step h and the plant's internal RK4 step, from the scenarios) and
+    how the claims' ladders refine that step (harness/studies/ladders.py)."""
+    groups = {}
+    for name in ALL_SCENARIOS:
+        case = Case(name, CONTROLLERS[0])
+        scenario = case.build()
+        internal = plant_step(scenario)
+        axis = plant_step_case(case)
+        key = (scenario.step, internal, None if axis is None else plant_step(axis.build()))
+        groups.setdefault(key, []).append(name)
+    parts = []
+    for (step, internal, other), names in groups.items():
+        where = f"{', '.join(names)}: h = {_seconds(step)}"
+        if internal is None:
+            parts.append(f"{where}, the plant's own integration")
+            continue
+        count = round(step / internal)
+        text = f"{where}, {count} RK4 step{'s' if count > 1 else ''} of {_seconds(internal)}"
+        parts.append(text + (f" (the plant axis: {_seconds(other)})" if other is not None else ""))
+    axis = any(other is not None for _, _, other in groups)
+    return ("plants integrated with RK4 in equal internal steps of at most the plant's max_internal_step within each "
+            f"communication step ({'; '.join(parts)}); the claims' ladders halve the internal step with h"
+            + (" and run h with another internal step (the plant axis)" if axis else ""))
+
+
 def choices_text() -> str:
-    return """The numbers depend on these choices (the paper is ambiguous there; all of them: docs/model.md, section 10):
+    """The choices the report's numbers depend on; the settling rule and the integration from the code's constants."""
+    return f"""The numbers depend on these choices (the paper is ambiguous there; all of them: docs/model.md, section 10):
 - Normalised FLS inputs saturated to the universe [-E_i, E_i]; sigmoid membership functions (slope 7 pendulum, 1.5 manipulator).
 - Modified tracking error E = e - (a0 + a1 t) exp(-5 t) (Remark 3) used by all three controllers, e(0), de(0) latched at the end of initialisation.
 - Comparison controllers are documented stand-ins with the same learning rate (gamma = 300): `fixed` (alpha = 1) for [46], `fae` (alpha = 1 plus w_hat, gamma_w = gamma) for [28]; the equations of [46] and [28] are not public here.
-- Pendulum disturbance d(t) enters additively in dx2; horizon 0-20 s; ts is the earliest time after which |e| <= 5 % max|ym| until T; es1, es2 are 100 max|e|, 100 max|de| over the last reference period [T - 2 pi, T] over max|ym|, max|dym|.
-- Sampled-data controller: u held over each communication step, theta += h * dtheta; plants integrated with RK4 at internal steps <= 0.1 ms; scores by the trapezoidal rule on the communication grid."""
+- Pendulum disturbance d(t) enters additively in dx2; horizon 0-20 s; {settling_text()}; es1, es2 are 100 max|e|, 100 max|de| over the last reference period [T - 2 pi, T] over max|ym|, max|dym|.
+- Sampled-data controller: u held over each communication step, theta += h * dtheta; {integration_text()}; scores by the trapezoidal rule on the communication grid."""
 
 
 def peak_memory_mib() -> float:
@@ -239,11 +281,19 @@ def peak_memory_mib() -> float:
 
 
 CLAIMS_METHOD = (
-    "Each claim is decided on step ladders: every case also runs at half the scenario's step, and a "
-    "case that an open claim needs at a further half (`--refine`). A score is its value at the finest "
-    "step run, ± its numerical error: the change of that score over the last halving (the loop is "
-    "first order in the step). A comparison is decided only when the gap exceeds the sum of both "
-    "errors; otherwise it is *not decided at this accuracy*; one decided by a gap under "
+    "Each claim is decided on ladders that refine what the error depends on: every case also runs at half the "
+    "scenario's step h (the plant's internal RK4 step halved with it) and, where the plant's right-hand side "
+    "switches (the manipulator's Coulomb friction), at h with another plant step (twice it, or half where h holds "
+    "one), and a case that an open claim needs at a further half (`--refine`). A score "
+    "is its value at the finest step run, ± an estimate of its distance to the continuous-time value of the "
+    f"model: {claims_module.SAFETY_FACTOR:g} x (the change of that score over the last halving of the step + the "
+    "error its change with the plant step leaves at the scenario's plant step, first order: the change itself "
+    "from twice the plant step, twice the change to half of it; none on a smooth plant, where RK4 is fourth order "
+    "and the halving of h with the plant step counts it) (the loop is first order in the step, the "
+    "plant's RK4 first order where the Coulomb friction switches; docs/verification.md). A "
+    "ladder of three or more halvings whose last change is not the smallest shows no convergence: its error is "
+    "unknown and its comparisons are *undecided at this step*. A comparison is decided only when the gap exceeds "
+    "the sum of both errors; otherwise it is *not decided at this accuracy*; one decided by a gap under "
     f"{100 * claims_module.CLOSE_MARGIN:g} % of the values says *close*. The tables above are at the scenario's "
     "step, so their digits differ from the values here where the numerical error reaches them.")
 PAPER_VALUES = (
@@ -314,7 +364,8 @@ def figure_caption(number: int, path: Path, rows: list) -> str:
 
 
 def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: list, wall_s: float, jobs: int,
-                    peak_mib: float = float("nan"), beyond_rows=(), rtol: float | None = None) -> str:
+                    peak_mib: float = float("nan"), beyond_rows=(), rtol: float | None = None,
+                    native_ladders: bool = False) -> str:
     how = ("one FMI co-simulation (controller, plant and reference FMUs coupled by the feedthrough-aware master)"
            if rtol is None else
            f"one Model Exchange run (the native FMUs integrated together by CVODE, rtol {rtol:g}, "
@@ -337,8 +388,9 @@ def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: l
                   "(converged by halving, docs/general_order.md).", "", beyond_paper_table(beyond_rows), ""]
         notes = table_notes(list(beyond_rows))
         parts += [*notes, ""] if notes else []
-    parts += ["## Claims of the paper, checked", "", PAPER_VALUES, "", CLAIMS_METHOD if rtol is None else CLAIMS_METHOD_ME,
-              ""]
+    method = CLAIMS_METHOD if rtol is None else CLAIMS_METHOD_ME
+    parts += ["## Claims of the paper, checked", "", PAPER_VALUES, "",
+              method + (f" {NATIVE_LADDERS_METHOD}" if native_ladders else ""), ""]
     parts += claims_module.claims_markdown(claims)
     parts += ["", "## Choices the numbers depend on", "", choices_text(), ""]
     parts += ["## Communication step (validated step, 1 %)", ""]
@@ -354,6 +406,10 @@ def report_markdown(rows: list, claims: list, convergence: dict, figure_paths: l
     return "\n".join(parts) + "\n"
 
 
+NATIVE_LADDERS_METHOD = (
+    f"The tables' runs at h are the pythonfmu FMUs' and the first rung of each ladder; the ladders' runs at "
+    f"{LADDER_RUNGS} and finer run on the native FMUs (the same equations in C, with the master's compiled loop: "
+    "seconds instead of minutes), whose scores are the pythonfmu edition's (tests/test_tables.py holds them equal).")
 CLAIMS_METHOD_ME = (
     "Model Exchange (`--algorithm me`) has no step to halve: each claim is decided on tolerance ladders. Every "
     f"case also runs at a {claims_module.TOLERANCE_FACTOR:g} times looser rtol, and a case that an open claim "
@@ -363,49 +419,32 @@ CLAIMS_METHOD_ME = (
     "both errors; otherwise it is *not decided at this accuracy*.")
 
 
-def half_step_case(case: Case) -> Case:
-    """The same case at half its step (no figure signals): the error estimate of the claims; for Model Exchange
-    the same case at a TOLERANCE_FACTOR looser rtol."""
-    if case.algorithm == MODEL_EXCHANGE:
-        return Case(case.scenario, case.controller, stop=case.stop, algorithm=MODEL_EXCHANGE,
-                    rtol=case.rtol * claims_module.TOLERANCE_FACTOR)
-    return Case(case.scenario, case.controller, step=case.build().step / 2, stop=case.stop)
-
-
-def case_cost(case: Case) -> int:
-    return case.build().steps
-
-
-def finer_case(name: str, controller: str, ladder: list, stop: float | None) -> Case:
-    """The next rung of a case's ladder: half its finest step, or (Model Exchange) a tighter rtol."""
-    if all(o.get("rtol") for o in ladder):
-        return Case(name, controller, stop=stop, algorithm=MODEL_EXCHANGE,
-                    rtol=min(o["rtol"] for o in ladder) / claims_module.TOLERANCE_FACTOR)
-    return Case(name, controller, step=min(o["step"] for o in ladder) / 2, stop=stop)
-
-
-def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int) -> tuple[list, list]:
+def refine_open_claims(ladders: dict, stop: float | None, jobs: int, levels: int,
+                       fmu_paths: dict | None = None) -> tuple[list, list]:
     """(claims, refined cases): up to ``levels`` further halvings of the step (tighter tolerances for
-    Model Exchange) for the cases a claim still open needs (``ladders`` gains their runs)."""
+    Model Exchange) for the cases a claim still open needs (``ladders`` gains their runs), on ``fmu_paths``
+    (None: the edition's FMUs)."""
     claims = claims_module.claims_check(ladders)
     refined = []
     for _ in range(levels):
         open_cases = claims_module.undecided_cases(claims)
         if not open_cases:
             break
-        finer = [finer_case(name, controller, ladders[(name, controller)], stop)
-                 for name, controller in sorted(open_cases)]
-        for outcome in run_cases(sorted(finer, key=case_cost, reverse=True), jobs=jobs,
-                                 description="claims: finer steps"):
-            ladders[(outcome["scenario"], outcome["controller"])].append(outcome)
+        finer = sorted((finer_case(name, controller, ladders[(name, controller)], stop)
+                        for name, controller in sorted(open_cases)), key=case_cost, reverse=True)
+        for case, outcome in zip(finer, run_cases(finer, jobs=jobs, description="claims: finer steps",
+                                                  fmu_paths=fmu_paths)):
+            ladders[(outcome["scenario"], outcome["controller"])].append(ladder_row(case, outcome))
             refined.append((outcome["scenario"], outcome["controller"], outcome.get("rtol") or outcome["step"]))
         claims = claims_module.claims_check(ladders)
     return claims, refined
 
 
 def ladder_words(model_exchange: bool) -> str:
-    """How the claims' ladders begin: each case at h and h/2, or (Model Exchange) at rtol and a looser one."""
-    return (f"at rtol and {claims_module.TOLERANCE_FACTOR:g} rtol" if model_exchange else "at h and h/2")
+    """How the claims' ladders begin: each case at h, at h/2 and at h with another plant's internal step, or
+    (Model Exchange) at rtol and a looser one."""
+    return (f"at rtol and {claims_module.TOLERANCE_FACTOR:g} rtol" if model_exchange
+            else "at h, h/2 and h with another plant step")
 
 
 def communication_steps(outcomes) -> int:
@@ -413,12 +452,21 @@ def communication_steps(outcomes) -> int:
     return sum(round((o["stop"] - o["start"]) / o["step"]) for o in outcomes)
 
 
+def plant_steps(rows) -> int:
+    """The plants' internal RK4 steps of co-simulation ladder rows (each with its ``plant_step``)."""
+    return sum(round((o["stop"] - o["start"]) / o["plant_step"]) for o in rows if o.get("plant_step"))
+
+
 def run_summary(paper_cases: int, pooled: int, beyond: int, refined: int, pool_s: float, wall_s: float, jobs: int,
-                peak_mib: float, steps: int | None, model_exchange: bool) -> str:
+                peak_mib: float, steps: int | None, model_exchange: bool, internal: int | None = None,
+                native_ladders: bool = False) -> str:
     """The command's first line: every run it made, by kind, with its wall time (README.md quotes the counts)."""
-    return (f"{pooled + refined} runs: {pooled} in one pool in {pool_s:.1f} s (the {paper_cases} cases of Tables I/II "
-            f"{ladder_words(model_exchange)}, {beyond} of the third-order plant), {refined} finer for open claims in "
+    pools = "two pools" if native_ladders else "one pool"
+    where = f"; {NATIVE_LADDER_WORDS}" if native_ladders else ""
+    return (f"{pooled + refined} runs: {pooled} in {pools} in {pool_s:.1f} s (the {paper_cases} cases of Tables I/II "
+            f"{ladder_words(model_exchange)}, {beyond} of the third-order plant{where}), {refined} finer for open claims in "
             f"{wall_s - pool_s:.1f} s; " + (f"{steps} communication steps, " if steps is not None else "")
+            + (f"{internal} plant RK4 steps, " if internal else "")
             + f"{wall_s:.1f} s wall on {jobs} processes; peak memory {peak_mib:.0f} MiB (largest process)")
 
 
@@ -439,19 +487,27 @@ def tables_command(args) -> int:
         raise cli_args.UsageError("--rtol is the tolerance of --algorithm me; co-simulation has a step")
     rtol = (args.rtol or DEFAULT_RTOL) if me else None
     cases = table_cases(args.stop, args.algorithm, rtol)
-    # every case at h (the tables) and at h/2 (the claims' error estimates) in one pool,
-    # the longest runs first, so both cores finish together
+    # every case at h (the tables), at h/2 and at h with another plant's internal step (the claims' error
+    # estimates) in one pool, the longest runs first, so both cores finish together
     extra = beyond_paper_cases(args.stop, args.algorithm, rtol)  # the third-order plant, beyond the paper (no claims)
-    runs = sorted([*cases, *map(half_step_case, cases)], key=case_cost, reverse=True)
+    runs = sorted([*cases, *(c for case in cases for c in ladder_cases(case))], key=case_cost, reverse=True)
     started = clock.perf_counter()
     everything = sorted([*runs, *extra], key=case_cost, reverse=True)
-    outcomes = dict(zip(everything, run_cases(everything, jobs=jobs,
-                                              description=f"Table I/II {ladder_words(me)}, third-order plant")))
-    rows = [outcomes[case] for case in cases]
+    native = None if me else native_ladder_fmus()  # the pythonfmu tables' ladders: on the native FMUs (seconds)
+    if native is None:
+        outcomes = dict(zip(everything, run_cases(everything, jobs=jobs,
+                                                  description=f"Table I/II {ladder_words(me)}, third-order plant")))
+    else:  # the ladders' own runs (h/2, the plant axis) first, then the tables' runs at h, which the ladders reuse
+        finer = sorted((c for case in cases for c in ladder_cases(case)), key=case_cost, reverse=True)
+        outcomes = dict(zip(finer, run_cases(finer, jobs=jobs, fmu_paths=native,
+                                             description=f"claims' ladders on the native FMUs ({LADDER_RUNGS})")))
+        own = sorted([*cases, *extra], key=case_cost, reverse=True)
+        outcomes.update(zip(own, run_cases(own, jobs=jobs, description="Table I/II at h, third-order plant")))
+    rows = [ladder_row(case, outcomes[case]) for case in cases]
     beyond_rows = [dict(outcomes[case], sets=dict(case.overrides)["controller.sets"]) for case in extra]
-    ladders = claims_module.ladders_from_rows([outcomes[case] for case in runs])
+    ladders = claims_module.ladders_from_rows([ladder_row(case, outcomes[case]) for case in runs])
     ladder_s = clock.perf_counter() - started
-    claims, refined = refine_open_claims(ladders, args.stop, jobs, args.refine)
+    claims, refined = refine_open_claims(ladders, args.stop, jobs, args.refine, native)
     wall_s = clock.perf_counter() - started
     peak_mib = peak_memory_mib()
     convergence = load_convergence()
@@ -472,10 +528,11 @@ def tables_command(args) -> int:
                 ("scenario", "controller", "sets", *TABLE_COLUMNS[2:-2], "status"))
     figure_paths = figures(rows, out)
     atomic_files.write_text(out / "report.md", report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib,
-                                                   beyond_rows, rtol))
+                                                   beyond_rows, rtol, native is not None))
+    counted = [*(o for ladder in ladders.values() for o in ladder), *(ladder_row(c, outcomes[c]) for c in extra)]
     print(run_summary(len(cases), len(everything), len(extra), len(refined), ladder_s, wall_s, jobs, peak_mib,
-                      None if me else communication_steps([*(o for ladder in ladders.values() for o in ladder),
-                                                            *(outcomes[case] for case in extra)]), me))
+                      None if me else communication_steps(counted), me, None if me else plant_steps(counted),
+                      native is not None))
     for name in ALL_SCENARIOS:
         print(f"\n{name}\n{paper_table(rows, name)}")
     print(f"\n{BEYOND_PAPER} (beyond the paper)\n{beyond_paper_table(beyond_rows)}")
@@ -507,18 +564,23 @@ def tables_command(args) -> int:
 
 
 def register(commands):
-    paper, pooled, beyond = pool_counts()
+    try:
+        paper, pooled, beyond = pool_counts()
+    except scenarios.ScenarioError:  # a scenario of the tables is missing: the command itself says which
+        paper, pooled, beyond = "Table I/II", "the", "the runs"
     tables = commands.add_parser("tables", help=f"run Table I/II and write the report: {pooled} co-simulations "
-                                                f"in one pool (the {paper} cases at their step and at half of it, "
-                                                f"{beyond} of the third-order plant beyond the paper), then finer "
-                                                "ones for the claims left open (--refine)")
+                                                f"first (the {paper} cases at their step, at half of it and, where "
+                                                f"the plant switches, at their step with another plant step, "
+                                                f"{beyond} of the third-order plant beyond the paper; in the pythonfmu "
+                                                "edition the ladders' own on the native FMUs where zig is installed), "
+                                                "then finer ones for the claims left open (--refine)")
     tables.add_argument("--out", default="results", help="output folder (default results/, ignored by git)")
     tables.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
     tables.add_argument("--stop", type=cli_args.positive_float,
                         help="shorter horizon (tests); default the scenarios' 20 s")
     tables.add_argument("--refine", type=cli_args.non_negative_int, default=1, metavar="LEVELS",
                         help="further halvings of the step for the cases an open claim needs (default 1; 0: "
-                             "decide on h and h/2 only)")
+                             "decide on the pool alone: h, h/2 and h with another plant step)")
     tables.add_argument("--algorithm", choices=("feedthrough", MODEL_EXCHANGE), default="feedthrough",
                         help="feedthrough: our co-simulation master (default); me: Model Exchange, the native FMUs "
                              "integrated by CVODE, no step (--edition native; docs/model_exchange.md)")
