@@ -28,7 +28,7 @@ from harness.studies.robustness.sample_run import SampleRunner
 from harness.studies.robustness.spec import parse_spec
 
 PARAMS = ("plant.mp=loguniform:0.05:2", "plant.lp=uniform:0.4:0.6", "plant.dist_gain=truncnormal:1:0.5:0:2")
-SPEC = "ITAE<0.082,umax<20"
+USER_SPEC = "ITAE<0.082,umax<20"
 SAMPLES = 80  # enough completed runs for RBD-FAST (influence.MIN_RUNS)
 
 
@@ -47,7 +47,7 @@ def study(native_paths, tmp_path_factory):
     """One study run to its end on a local pool of two processes: (plan, outcome, folder)."""
     out = tmp_path_factory.mktemp("robustness")
     plan = make_plan(native_paths)
-    outcome = robustness.run_study(plan, out, jobs=2, spec=parse_spec(SPEC), progress=False)
+    outcome = robustness.run_study(plan, out, jobs=2, spec=parse_spec(USER_SPEC), progress=False)
     return plan, outcome, out
 
 
@@ -208,7 +208,7 @@ def test_the_summary_is_recomputed_from_the_streamed_rows(study):
     plan, outcome, out = study
     found = table(out / rows_module.CSV_NAME)
     summary = outcome.summary
-    spec = parse_spec(SPEC)
+    spec = parse_spec(USER_SPEC)
     assert summary["samples"] == SAMPLES
     for controller in plan.controllers:
         mine = [row for row in found if row["controller"] == controller]
@@ -238,7 +238,7 @@ def test_the_summary_is_recomputed_from_the_streamed_rows(study):
                 math.isclose(quantiles["median"]["high"], interval.high)
             assert quantiles["q05"]["low"] <= quantiles["q05"]["value"] <= quantiles["q05"]["high"]
     assert any(e["spec"]["count"] not in (0, SAMPLES) for e in summary["controllers"].values()), \
-        "choose a SPEC that some runs meet and others do not"
+        "choose a USER_SPEC that some runs meet and others do not"
 
 
 def test_the_paired_differences_pair_each_sample_with_itself(study):
