@@ -31,6 +31,8 @@ SLOW = {
         "test_the_project_keeps_its_import_architecture",),
     "test_bench.py": ("test_bench_json_reports_every_figure_and_times_the_right_runs",
         "test_the_main_job_is_timed_as_a_user_runs_it",),
+    "test_c_baselines.py": ("test_the_c_host_and_the_floor_reproduce_the_masters_record_over_the_whole_horizon",
+        "test_callgrind_counts_the_floors_instructions_per_step",),
     "test_build_native.py": ("test_every_binary_exports_the_whole_fmi_api_and_nothing_else",
         "test_invalid_parameters_and_inputs_get_the_python_editions_messages",
         "test_libcosim_runs_the_native_fmus_from_the_exported_ssp_as_the_python_ones",
