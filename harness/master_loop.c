@@ -25,6 +25,10 @@
  *   for each FMU: status = doStep(instance, t, step, noSetFMUStatePriorToCurrentPoint = true)
  *       stop if status > warning
  *
+ * The last communication point (row `steps`, master_loop_finish; Master._loop's end and Master.run's
+ * last check): the plan's pass at t = start + steps * step, its record, no doStep; then the rows no
+ * block check has seen, [steps + 1 - check_every, steps + 1), below their bounds.
+ *
  * The structs, the LOOP_ codes and the plan's pass are harness/loop_interface.h, shared with
  * harness/me_loop.c.  Built for the machine that runs the harness (c_toolchain.host_library), with
  * the native edition's flags (-ffp-contract=off: t is computed exactly as Python computes it).
@@ -50,6 +54,8 @@ EXPORT int master_loop_run(const Action *plan, size_t actions, const Stepper *st
                            double start, double step, int64_t first_row, int64_t last_row, double *record,
                            size_t columns, const double *column_bounds, int64_t check_every, Outcome *outcome) {
     memset(outcome, 0, sizeof *outcome);
+    int64_t to_check = check_every - (first_row + 1) % check_every; /* rows left until (n + 1) % check_every == 0 */
+    if (to_check == check_every) to_check = 0;
     for (int64_t n = first_row; n < last_row; n++) {
         double t = start + (double)n * step;
         int what = run_plan(plan, actions, outcome);
@@ -58,10 +64,12 @@ EXPORT int master_loop_run(const Action *plan, size_t actions, const Stepper *st
             return what;
         }
         record_reads(plan, actions, record + (size_t)n * columns);
-        if ((n + 1) % check_every == 0 &&
-            !record_within_bounds(record, columns, column_bounds, n + 1 - check_every, n + 1)) {
-            outcome->row = n;
-            return loop_stop(outcome, LOOP_RECORD_DIVERGED, -1, 0);
+        if (to_check-- == 0) {
+            to_check = check_every - 1;
+            if (!record_within_bounds(record, columns, column_bounds, n + 1 - check_every, n + 1)) {
+                outcome->row = n;
+                return loop_stop(outcome, LOOP_RECORD_DIVERGED, -1, 0);
+            }
         }
         for (size_t s = 0; s < stepper_count; s++) {
             int status = do_step(&steppers[s], t, step);
@@ -71,5 +79,18 @@ EXPORT int master_loop_run(const Action *plan, size_t actions, const Stepper *st
             }
         }
     }
+    return LOOP_DONE;
+}
+
+EXPORT int master_loop_finish(const Action *plan, size_t actions, int64_t steps, double *record, size_t columns,
+                              const double *column_bounds, int64_t check_every, Outcome *outcome) {
+    memset(outcome, 0, sizeof *outcome);
+    outcome->row = steps;
+    int what = run_plan(plan, actions, outcome);
+    if (what != LOOP_DONE) return what;
+    record_reads(plan, actions, record + (size_t)steps * columns);
+    int64_t first = steps + 1 - check_every > 0 ? steps + 1 - check_every : 0;
+    if (!record_within_bounds(record, columns, column_bounds, first, steps + 1))
+        return loop_stop(outcome, LOOP_RECORD_DIVERGED, -1, 0);
     return LOOP_DONE;
 }

@@ -38,11 +38,10 @@ def test_the_c_host_and_the_floor_reproduce_the_masters_record_bit_for_bit(nativ
     scenario = scenarios.configure("pendulum_case1", "vud", None, stop)
     master = Master(scenario, "feedthrough", native_fmus).run()
     assert tuple(master.columns) == c_baselines.COLUMNS and master.complete
-    host, host_seconds = c_baselines.plain_host(scenario, native_fmus)
-    floor, floor_seconds = c_baselines.math_floor(scenario)
-    assert host_seconds > 0 and floor_seconds > 0
-    assert_bit_identical(host, master.values)
-    assert_bit_identical(floor, master.values)
+    host, floor = c_baselines.plain_host(scenario, native_fmus), c_baselines.math_floor(scenario)
+    for run in (host, floor):
+        assert run.loop_s > 0 and run.loop_cpu_s > 0 and run.us_per_step() == 1e6 * run.loop_s / scenario.steps
+        assert_bit_identical(run.record, master.values)
     assert np.ptp(master.signal("controller.u")) > 1.0 and np.ptp(master.signal("controller.theta4")) > 0.1
 
 
@@ -56,8 +55,8 @@ def test_the_floor_follows_the_parameters_it_is_given(native_fmus):
     scenario.components["controller"].parameters.update(gamma=150.0, E1=0.8, kappa2=4.0, theta0=0.5, lambda_e=3.0)
     scenario.components["plant"].parameters.update(x1_start=-0.1, mp=0.3)
     master = Master(scenario, "feedthrough", native_fmus).run()
-    assert_bit_identical(c_baselines.math_floor(scenario)[0], master.values)
-    assert_bit_identical(c_baselines.plain_host(scenario, native_fmus)[0], master.values)
+    assert_bit_identical(c_baselines.math_floor(scenario).record, master.values)
+    assert_bit_identical(c_baselines.plain_host(scenario, native_fmus).record, master.values)
 
 
 @pytest.mark.parametrize("controller", ["fixed", "fae"])
@@ -67,7 +66,7 @@ def test_the_host_wires_every_connection_as_the_master(native_fmus, controller):
     scenario = scenarios.configure("pendulum_case1", controller, None, 1.0)
     scenario.components["controller"].parameters["fls_input"] = 2
     master = Master(scenario, "feedthrough", native_fmus).run()
-    assert_bit_identical(c_baselines.plain_host(scenario, native_fmus)[0], master.values)
+    assert_bit_identical(c_baselines.plain_host(scenario, native_fmus).record, master.values)
 
 
 def test_the_baselines_refuse_a_loop_they_do_not_know(native_fmus):

@@ -20,6 +20,7 @@ import pytest
 from harness.fmu_build import native as build_native
 from harness.fmu_build import toolchain as c_toolchain
 from harness import compiled_loop, master_loop
+from harness import master as master_module
 from harness import scenario as scenarios
 from harness.loop_interface import ACTION_READ, ACTION_WRITE, Action, LoopOutcome, Outcome, Stepper
 from harness.master import Master, SimulationFailed
@@ -122,6 +123,35 @@ class FakeSystem:
                  self.record.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 2,
                  ctypes.cast(self.column_bounds, ctypes.POINTER(ctypes.c_double)), check_every, ctypes.byref(outcome))
         return outcome
+
+    def finish(self, steps: int, check_every=4) -> Outcome:
+        function = master_loop.library("c").master_loop_finish
+        outcome = Outcome()
+        function(self.actions, 3, steps, self.record.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 2,
+                 ctypes.cast(self.column_bounds, ctypes.POINTER(ctypes.c_double)), check_every, ctypes.byref(outcome))
+        return outcome
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_the_last_communication_point_is_the_plans_pass_and_the_check_of_the_rows_left(fmi_version):
+    """master_loop_finish: row `steps` is read, handed along and recorded with no doStep; then the rows after
+    the last block check are checked (here rows 8 .. 10 of 11, check_every 4)."""
+    system = FakeSystem(fmi_version, rows=11)
+    assert system.run(0, 10).outcome == LoopOutcome.DONE
+    del system.trace[:]
+    outcome = system.finish(10)
+    assert outcome.outcome == LoopOutcome.DONE and outcome.row == 10
+    assert [entry[0] for entry in system.trace] == ["getA", "setB", "getB"]  # no doStep
+    assert list(system.record[10]) == [3 * (2 * 10 + 0.5), 10.25]
+    tail = FakeSystem(fmi_version, rows=11, record_bounds=(1e6, 9.0), a0_override=(10, 0.0))  # row 9 alone is beyond
+    assert tail.run(0, 8).outcome == LoopOutcome.DONE  # rows 0 .. 7, checked at 4 and 8
+    tail.row = {key: 10 for key in tail.row}
+    tail.record[8:10] = [[0.0, 8.25], [0.0, 9.25]]  # rows 8, 9 as a run would leave them
+    stopped = tail.finish(10)
+    assert (stopped.outcome, stopped.row) == (LoopOutcome.RECORD_DIVERGED, 10)
+    failing = FakeSystem(fmi_version, rows=11, fail=("getA", 0, 3))
+    failed = failing.finish(10)
+    assert (failed.outcome, failed.row, failed.index, failed.status) == (LoopOutcome.READ_FAILED, 10, 0, 3)
 
 
 @pytest.mark.parametrize("fmi_version", [2, 3])
@@ -364,3 +394,40 @@ def test_progress_is_reported_at_the_same_rows_with_either_loop(native_fmus):
             progress=lambda done, total, seen=calls[loop]: seen.append((done, total)), progress_every=30)
     assert calls["python"] == calls["c"]
     assert calls["c"][:2] == [(30, 200), (60, 200)] and calls["c"][-1] == (200, 200)
+
+
+def _counted_blocks(monkeypatch) -> list:
+    """The (first_row, last_row) of every call of the compiled loop from now on."""
+    blocks = []
+    run = master_loop.CompiledLoop.run
+
+    def counted(self, start, step, first_row, last_row):
+        blocks.append((first_row, last_row))
+        return run(self, start, step, first_row, last_row)
+
+    monkeypatch.setattr(master_loop.CompiledLoop, "run", counted)
+    return blocks
+
+
+def test_a_run_no_one_follows_is_one_call_of_the_compiled_loop(native_fmus, monkeypatch):
+    """No Python between blocks: without a progress callback the C loop runs every row (and checks every
+    bound) in one call."""
+    blocks = _counted_blocks(monkeypatch)
+    scenario = scenarios.configure("pendulum_case1", "vud", None, 1.0)  # 2000 steps
+    result = Master(scenario, "feedthrough", native_fmus, loop="c").run()
+    assert blocks == [(0, 2000)] and result.complete and result.rows == 2001
+
+
+def test_followed_progress_comes_in_blocks_of_wall_time(native_fmus, monkeypatch):
+    """With a callback and no progress_every, the first block has FIRST_PROGRESS_BLOCK rows and the next ones
+    last about PROGRESS_BLOCK_S each, sized from the rate so far; one progress call per block, the last at the end."""
+    blocks = _counted_blocks(monkeypatch)
+    monkeypatch.setattr(master_module, "FIRST_PROGRESS_BLOCK", 100)
+    monkeypatch.setattr(master_module, "PROGRESS_BLOCK_S", 0.004)  # a few ms: several blocks in a short run
+    calls = []
+    scenario = scenarios.configure("pendulum_case1", "vud", None, 5.0)  # 10000 steps
+    Master(scenario, "feedthrough", native_fmus, loop="c").run(progress=lambda done, total: calls.append(done))
+    assert blocks[0] == (0, 100) and blocks[-1][1] == 10000 and 3 <= len(blocks) < 200
+    assert all(first == previous_last for (first, _), (_, previous_last) in zip(blocks[1:], blocks))
+    assert max(last - first for first, last in blocks[1:-1]) > 100  # sized from the rate, not by a fixed count
+    assert calls == [last for _, last in blocks] + [10000]  # and Master.run's own final call

@@ -7,8 +7,8 @@
 * the math floor (harness/hosts/math_floor.c): the same closed loop with every equation inlined in
   one C function and no FMI (pendulum_case1's plant and the vud controller of order 2, 2 sets).
 
-Each runs a scenario of that shape and returns its record (the master's 15 columns, rows 0 ..
-steps) and the seconds of its fixed-step loop alone; tests/test_c_baselines.py holds both records
+Each runs a scenario of that shape and returns a :class:`BaselineRun`: its record (the master's 15 columns,
+rows 0 .. steps) and the seconds of its fixed-step loop alone, in wall time and in the thread's CPU time; tests/test_c_baselines.py holds both records
 equal to the master's, bit for bit.  Both libraries are built for this machine by zig's C compiler
 (harness/fmu_build/toolchain.py), with the native edition's flags, and loaded once per process.
 """
@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import ctypes
 import time as clock
+from dataclasses import dataclass
 from pathlib import Path
 
 import fmpy
@@ -32,6 +33,7 @@ from ..scenario_checks import resolve_fmu
 HOST_SOURCE = Path(__file__).with_name("plain_c_host.c")
 FLOOR_SOURCE = Path(__file__).with_name("math_floor.c")
 
+SCENARIO, CONTROLLER = "pendulum_case1", "vud"  # the loop both baselines run (the floor: this controller only)
 #: the loop both baselines know: instance -> its FMU, and the record's columns (the master's plan order)
 COMPONENTS = {"plant": "InvertedPendulum", "reference": "TrackingReference", "controller": "AdaptiveFuzzyController"}
 COLUMNS = ("plant.y", "plant.dy", "plant.d", "reference.ym", "reference.dym", "reference.e", "reference.de",
@@ -51,6 +53,16 @@ HOST_REFERENCES = (("plant_outputs", "plant", ("y", "dy", "d")), ("plant_input",
 
 class BaselineError(RuntimeError):
     """A baseline cannot run this scenario, or one of its FMI calls failed."""
+
+
+@dataclass
+class BaselineRun:
+    record: object  # numpy array, rows 0 .. steps x COLUMNS
+    loop_s: float  # the fixed-step loop, wall time
+    loop_cpu_s: float  # the same, CPU time of the thread that ran it
+
+    def us_per_step(self, cpu: bool = False) -> float:
+        return 1e6 * (self.loop_cpu_s if cpu else self.loop_s) / max(len(self.record) - 1, 1)
 
 
 # ------------------------------------------------------------------ the C structs
@@ -130,9 +142,9 @@ def _binary(info, folder: str) -> Path:
     return Path(folder, "binaries", fmpy.platform, info.model_identifier + fmpy.sharedLibraryExtension)
 
 
-def plain_host(scenario: Scenario, fmu_paths: dict | None = None) -> tuple:
-    """(record, seconds of the fixed-step loop) of the plain C host on the scenario's native FMI 2.0 FMUs
-    (``fmu_paths``: {model identifier: FMU}, else the edition's)."""
+def plain_host(scenario: Scenario, fmu_paths: dict | None = None) -> BaselineRun:
+    """The plain C host's run on the scenario's native FMI 2.0 FMUs (``fmu_paths``: {model identifier: FMU},
+    else the edition's)."""
     check_shape(scenario)
     library = _library("plain_c_host", HOST_SOURCE)
     system, keep = HostSystem(), []
@@ -166,16 +178,16 @@ def plain_host(scenario: Scenario, fmu_paths: dict | None = None) -> tuple:
     try:
         if library.plain_host_open(ctypes.byref(system), ctypes.byref(host)) != 0:
             raise BaselineError(f"the plain C host: {library.plain_host_message(host).decode()}")
-        started = clock.perf_counter()
+        started, cpu_started = clock.perf_counter(), clock.thread_time()
         status = library.plain_host_run(host, scenario.steps, record.ctypes.data_as(_double_p))
-        seconds = clock.perf_counter() - started
+        seconds, cpu_seconds = clock.perf_counter() - started, clock.thread_time() - cpu_started
         if status != 0:
             raise BaselineError(f"the plain C host: {library.plain_host_message(host).decode()}")
     finally:
         closed = library.plain_host_close(host)
     if closed != 0:
         raise BaselineError(f"the plain C host: fmi2Terminate returned {closed}")
-    return record, seconds
+    return BaselineRun(record, seconds, cpu_seconds)
 
 
 def floor_parameters(scenario: Scenario) -> FloorParameters:
@@ -201,15 +213,15 @@ def floor_parameters(scenario: Scenario) -> FloorParameters:
     return FloorParameters(**{name: float(given[name]) for name in FLOOR_FIELDS})
 
 
-def math_floor(scenario: Scenario) -> tuple:
-    """(record, seconds of the loop) of the math floor."""
+def math_floor(scenario: Scenario) -> BaselineRun:
+    """The math floor's run of the scenario."""
     constants = floor_parameters(scenario)
     library = _library("math_floor", FLOOR_SOURCE)
     record = _record(scenario)
-    started = clock.perf_counter()
+    started, cpu_started = clock.perf_counter(), clock.thread_time()
     library.math_floor_run(ctypes.byref(constants), scenario.steps, record.ctypes.data_as(_double_p))
-    return record, clock.perf_counter() - started
+    return BaselineRun(record, clock.perf_counter() - started, clock.thread_time() - cpu_started)
 
 
-__all__ = ["plain_host", "math_floor", "floor_parameters", "check_shape", "parameters", "BaselineError", "COLUMNS",
+__all__ = ["plain_host", "math_floor", "BaselineRun", "floor_parameters", "check_shape", "parameters", "BaselineError", "COLUMNS",
            "COMPONENTS", "HOST_SOURCE", "FLOOR_SOURCE"]

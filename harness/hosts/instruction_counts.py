@@ -34,7 +34,7 @@ LOOPS = ("master", "host", "floor")
 CATEGORIES = ("libm", "fmus", "loop", "other")
 COLLECTED = "ffi_call"  # callgrind collects inside this function only (Python -> C calls)
 LOOP_SOURCES = ("master_loop.c", "loop_interface.h", "plain_c_host.c", "math_floor.c")
-SCENARIO, CONTROLLER = "pendulum_case1", "vud"
+SCENARIO, CONTROLLER = c_baselines.SCENARIO, c_baselines.CONTROLLER
 
 
 class InstructionCountError(RuntimeError):
