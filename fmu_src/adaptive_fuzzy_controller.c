@@ -287,6 +287,9 @@ int model_compute_outputs(ModelInstance *m) {
 
 #if HOST_ROBUST
 /* let the latch rule see this doStep's inputs; restart on a re-latch, warn once */
+#if defined(__GNUC__)
+__attribute__((noinline)) /* the first doSteps only: apart from the per-step path of every other */
+#endif
 static int watch_initial_error(ModelInstance *m, double time) {
     ControllerState *state = STATE(m);
     double sample[MAX_ORDER];
@@ -303,6 +306,15 @@ static int watch_initial_error(ModelInstance *m, double time) {
         if (latch_warning(&state->latch, ERROR_NAMES, message, sizeof message)) fmu_warn(m, "%s", message);
     }
     return MODEL_OK;
+}
+#endif
+
+#if HOST_ROBUST
+/* u chatters (chatter_monitor): the warning, once */
+MESSAGE_PATH static void warn_chatter(ModelInstance *m, double step_size) {
+    char message[2048];
+    chatter_warning(&STATE(m)->chatter, step_size, message, sizeof message);
+    fmu_warn(m, "%s", message);
 }
 #endif
 
@@ -346,11 +358,7 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     }
     V(m, w_hat) = w_hat;
 #if HOST_ROBUST
-    if (chatter_update(&state->chatter, V(m, u), step_size)) {
-        char message[2048];
-        chatter_warning(&state->chatter, step_size, message, sizeof message);
-        fmu_warn(m, "%s", message);
-    }
+    if (chatter_update(&state->chatter, V(m, u), step_size)) warn_chatter(m, step_size);
 #endif
     return MODEL_OK;
 }

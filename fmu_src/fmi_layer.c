@@ -354,11 +354,13 @@ static Status get_values(ModelInstance *m, const unsigned *vr, size_t n, double 
     return STATUS_OK;
 }
 
-/* fmi2GetReal / fmi3GetFloat64.  The per-step path: an initialised instance reads Reals of the table (after
- * its outputs are brought up to date); anything else (another state, time, a derivative, an Integer, a
- * value reference out of range) goes to get_values, which checks each and says what is wrong. */
+/* fmi2GetReal / fmi3GetFloat64.  The per-step path: an initialised instance (a mode between
+ * exitInitializationMode and terminate: set_state leaves those modes for a state not initialised) reads
+ * Reals of the table after its outputs are brought up to date; anything else (another state, time, a
+ * derivative, an Integer, a value reference out of range) goes to get_values, which checks each and says
+ * what is wrong. */
 static Status get_reals(ModelInstance *m, const unsigned *vr, size_t n, double *real, const char *call) {
-    if (m && (m->mode & INITIALIZED_MODES) && m->s->initialized != 0.0) {
+    if (m && (m->mode & INITIALIZED_MODES)) {
         if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return STATUS_ERROR;
         const double *values = m->s->values;
         size_t i = 0;

@@ -445,6 +445,8 @@ class Master:
         t = self.scenario.start + row * self.scenario.step
         kind = outcome.outcome
         self.rows_done = row  # the row's reads and writes are not complete
+        if kind == LoopOutcome.OUT_OF_MEMORY:
+            raise MemoryError(f"the compiled master loop could not allocate its working memory at row {row}")
         if kind == LoopOutcome.WRITE_DIVERGED:
             self._diverged_on_write(plan[outcome.index], outcome.copy, outcome.value, t)
         if kind in (LoopOutcome.READ_FAILED, LoopOutcome.WRITE_FAILED):

@@ -21,7 +21,8 @@
  *              status = setReal(instance, references, count, values)       stop if status > warning
  *   record[n, first .. first + recorded) = the read values
  *   if (n + 1) % check_every == 0: stop if a recorded value of the last check_every rows
- *       is not below its bound in magnitude (!(|v| < bound), NaN too)
+ *       is not below its bound in magnitude (!(|v| < bound), NaN too; each value is tested as its
+ *       row is recorded, the run stops at the block's end)
  *   for each FMU: status = doStep(instance, t, step, noSetFMUStatePriorToCurrentPoint = true)
  *       stop if status > warning
  *
@@ -29,10 +30,15 @@
  * last check): the plan's pass at t = start + steps * step, its record, no doStep; then the rows no
  * block check has seen, [steps + 1 - check_every, steps + 1), below their bounds.
  *
+ * master_loop_run makes the rows' plan once per call (RowPlan below): the same calls with the same
+ * values and the same checks, with fewer copies; master_loop_finish runs the plan's pass as it is.
+ *
  * The structs, the LOOP_ codes and the plan's pass are harness/loop_interface.h, shared with
  * harness/me_loop.c.  Built for the machine that runs the harness (c_toolchain.host_library), with
  * the native edition's flags (-ffp-contract=off: t is computed exactly as Python computes it).
  */
+#include <stdlib.h>
+
 #include "loop_interface.h"
 
 /* the doStep of FMI 2.0 and FMI 3.0 */
@@ -50,23 +56,148 @@ static int do_step(const Stepper *s, double time, double step) {
     return ((Fmi2DoStep)s->do_step)(s->instance, time, step, 1);
 }
 
-EXPORT int master_loop_run(const Action *plan, size_t actions, const Stepper *steppers, size_t stepper_count,
-                           double start, double step, int64_t first_row, int64_t last_row, double *record,
-                           size_t columns, const double *column_bounds, int64_t check_every, Outcome *outcome) {
-    memset(outcome, 0, sizeof *outcome);
+/* The rows' plan, made once per call of master_loop_run from the plan (the same calls, checks and values;
+ * less copying):
+ * - a read whose every value is recorded (recorded == count) has its getReal fill the record's row
+ *   itself, and the writes take those values from the row;
+ * - the test of the recorded values against their bounds leaves out a value that a write later in the
+ *   pass tests against a bound no larger than its column's: a value beyond its column's bound has already
+ *   stopped the row on its way to an input. */
+typedef struct {
+    unsigned char *direct;   /* per action: a read that fills its record columns itself */
+    const double **from;     /* per copy of the writes, in plan order: where its value is, outside the row */
+    int64_t *column;         /* ... or its column in the row (-1: `from`) */
+    size_t *checked;         /* the columns the block check tests */
+    double *checked_bounds;  /* ... and their bounds */
+    size_t checks;
+    int copies_after;        /* some read's recorded values are copied into the row after the pass */
+    void *memory;
+} RowPlan;
+
+static int make_row_plan(const Action *plan, size_t actions, size_t columns, const double *column_bounds,
+                         RowPlan *rows) {
+    size_t copies = 0;
+    for (size_t i = 0; i < actions; i++)
+        if (plan[i].kind == ACTION_WRITE) copies += plan[i].count;
+    size_t bytes = copies * (sizeof(double *) + sizeof(int64_t)) + columns * (sizeof(double) + sizeof(size_t) + 1) +
+                   actions + 64;
+    char *memory = (char *)calloc(1, bytes);
+    if (!memory) return 0;
+    rows->memory = memory;
+    rows->from = (const double **)memory;
+    rows->column = (int64_t *)(memory + copies * sizeof(double *));
+    rows->checked_bounds = (double *)(memory + copies * (sizeof(double *) + sizeof(int64_t)));
+    rows->checked = (size_t *)(rows->checked_bounds + columns);
+    rows->direct = (unsigned char *)(rows->checked + columns);
+    unsigned char *covered = rows->direct + actions; /* per column: tested on its way to an input */
+    rows->copies_after = 0;
+    for (size_t i = 0; i < actions; i++) {
+        rows->direct[i] = plan[i].kind == ACTION_READ && plan[i].recorded == plan[i].count && plan[i].count > 0;
+        rows->copies_after |= plan[i].kind == ACTION_READ && plan[i].recorded && !rows->direct[i];
+    }
+    size_t copy = 0;
+    for (size_t i = 0; i < actions; i++) {
+        const Action *a = &plan[i];
+        if (a->kind != ACTION_WRITE) continue;
+        for (size_t k = 0; k < a->count; k++, copy++) {
+            size_t j = a->source_index[k];
+            rows->from[copy] = a->sources[k] + j;
+            rows->column[copy] = -1;
+            for (size_t r = 0; r < i; r++) { /* the read earlier in the pass that fills the source */
+                const Action *read = &plan[r];
+                if (read->kind != ACTION_READ || read->values != a->sources[k]) continue;
+                if (rows->direct[r]) rows->column[copy] = (int64_t)(read->first_column + j);
+                if (j < read->recorded && a->bounds[k] <= column_bounds[read->first_column + j])
+                    covered[read->first_column + j] = 1;
+            }
+        }
+    }
+    rows->checks = 0;
+    for (size_t i = 0; i < actions; i++) {
+        const Action *a = &plan[i];
+        if (a->kind != ACTION_READ) continue;
+        for (size_t c = a->first_column; c < a->first_column + a->recorded; c++)
+            if (!covered[c]) {
+                rows->checked_bounds[rows->checks] = column_bounds[c];
+                rows->checked[rows->checks++] = c;
+            }
+    }
+    return 1;
+}
+
+/* the getReal or setReal of an action into (or from) `values` */
+static inline int action_call_with(const Action *a, double *values) {
+    if (a->fmi_version == 3)
+        return ((Fmi3ArrayCall)a->call)(a->instance, a->references, a->count, values, a->count);
+    return ((Fmi2ArrayCall)a->call)(a->instance, a->references, a->count, values);
+}
+
+/* run_plan for one row of the record, with the rows' plan; the values not read into the row itself are
+ * copied there afterwards (record_reads); returns LOOP_DONE or what stopped it, as run_plan */
+static inline int run_row(const Action *plan, size_t actions, const RowPlan *rows, double *row, Outcome *outcome) {
+    size_t copy = 0;
+    for (size_t i = 0; i < actions; i++) {
+        const Action *a = &plan[i];
+        if (a->kind == ACTION_READ) {
+            int status = action_call_with(a, rows->direct[i] ? row + a->first_column : a->values);
+            if (status > STATUS_WARNING) return loop_stop(outcome, LOOP_READ_FAILED, (int64_t)i, status);
+            continue;
+        }
+        for (size_t k = 0; k < a->count; k++, copy++) {
+            int64_t column = rows->column[copy];
+            double value = column >= 0 ? row[column] : *rows->from[copy];
+            if (!(fabs(value) < a->bounds[k])) {
+                outcome->copy = (int64_t)k;
+                outcome->value = value;
+                return loop_stop(outcome, LOOP_WRITE_DIVERGED, (int64_t)i, 0);
+            }
+            a->values[k] = value;
+        }
+        int status = action_call_with(a, a->values);
+        if (status > STATUS_WARNING) return loop_stop(outcome, LOOP_WRITE_FAILED, (int64_t)i, status);
+    }
+    if (!rows->copies_after) return LOOP_DONE;
+    for (size_t i = 0; i < actions; i++) {
+        const Action *a = &plan[i];
+        if (a->kind == ACTION_READ && a->recorded && !rows->direct[i])
+            memcpy(row + a->first_column, a->values, a->recorded * sizeof(double));
+    }
+    return LOOP_DONE;
+}
+
+/* the block check's test of one recorded row (record_within_bounds on the columns the rows' plan keeps):
+ * whether a value is not below its bound (!(|v| < bound), NaN too) */
+static inline int row_beyond(const RowPlan *rows, const double *row) {
+    int beyond = 0;
+    const size_t *checked = rows->checked;
+    const double *bounds = rows->checked_bounds;
+    for (size_t c = 0, checks = rows->checks; c < checks; c++) beyond |= !(fabs(row[checked[c]]) < bounds[c]);
+    return beyond;
+}
+
+static int run_rows(const Action *plan, size_t actions, const RowPlan *rows, const Stepper *steppers,
+                    size_t stepper_count, double start, double step, int64_t first_row, int64_t last_row,
+                    double *record, size_t columns, const double *column_bounds, int64_t check_every,
+                    Outcome *outcome) {
     int64_t to_check = check_every - (first_row + 1) % check_every; /* rows left until (n + 1) % check_every == 0 */
     if (to_check == check_every) to_check = 0;
+    int beyond = 0;                                         /* a recorded value of this block is beyond its bound */
+    int whole_block = (first_row + 1 + to_check) - check_every >= first_row; /* the first block began in this call */
     for (int64_t n = first_row; n < last_row; n++) {
         double t = start + (double)n * step;
-        int what = run_plan(plan, actions, outcome);
+        double *row = record + (size_t)n * columns;
+        int what = run_row(plan, actions, rows, row, outcome);
         if (what != LOOP_DONE) {
             outcome->row = n;
             return what;
         }
-        record_reads(plan, actions, record + (size_t)n * columns);
+        beyond |= row_beyond(rows, row);
         if (to_check-- == 0) {
             to_check = check_every - 1;
-            if (!record_within_bounds(record, columns, column_bounds, n + 1 - check_every, n + 1)) {
+            if (!whole_block) /* the block's first rows were recorded by an earlier call: test them all */
+                beyond |= !record_within_bounds(record, columns, column_bounds, n + 1 - check_every, n + 1);
+            whole_block = 1;
+            if (beyond) {
                 outcome->row = n;
                 return loop_stop(outcome, LOOP_RECORD_DIVERGED, -1, 0);
             }
@@ -80,6 +211,21 @@ EXPORT int master_loop_run(const Action *plan, size_t actions, const Stepper *st
         }
     }
     return LOOP_DONE;
+}
+
+EXPORT int master_loop_run(const Action *plan, size_t actions, const Stepper *steppers, size_t stepper_count,
+                           double start, double step, int64_t first_row, int64_t last_row, double *record,
+                           size_t columns, const double *column_bounds, int64_t check_every, Outcome *outcome) {
+    memset(outcome, 0, sizeof *outcome);
+    RowPlan rows;
+    if (!make_row_plan(plan, actions, columns, column_bounds, &rows)) {
+        outcome->row = first_row;
+        return loop_stop(outcome, LOOP_OUT_OF_MEMORY, -1, 0);
+    }
+    int what = run_rows(plan, actions, &rows, steppers, stepper_count, start, step, first_row, last_row, record,
+                        columns, column_bounds, check_every, outcome);
+    free(rows.memory);
+    return what;
 }
 
 EXPORT int master_loop_finish(const Action *plan, size_t actions, int64_t steps, double *record, size_t columns,

@@ -4,8 +4,8 @@
  *
  * plant_integration.py      C twin
  * internal_step_count       internal_step_count  (plant_integration.c)
- * rk4_advance               rk4_advance          (here: the lean 2-state path)
- * rk4_advance_states        rk4_advance_states   (here: any number of states)
+ * rk4_advance               rk4_split + rk4_advance          (here: the lean 2-state path)
+ * rk4_advance_states        rk4_split + rk4_advance_states   (here: any number of states)
  *
  * The two advances are static inline: a plant file that calls one with its own derivative (its
  * plant_advance, rk4_plant_slave.h) gets the derivative inlined into the RK4 stages, with no call
@@ -24,15 +24,31 @@ typedef void (*PlantDerivative)(double t, const double x[], double u, const doub
 /* n = ceil(step_size / max_internal_step - 1e-12), at least 1 (0 for step_size 0) */
 long internal_step_count(double step_size, double max_internal_step);
 
-/* advance (x[0], x[1]) from t to t + step_size with u held, in n equal RK4 steps h = step_size / n that
- * start at t + i h (not at an accumulated sum) */
-static inline void rk4_advance(PlantDerivative derivative, double t, double x[2], double u, double step_size,
-                               double max_internal_step, const double *params) {
-    long n = internal_step_count(step_size, max_internal_step);
-    if (n == 0) return;
-    double h = step_size / (double)n;
-    double half = 0.5 * h;
-    double sixth = h / 6.0;
+/* The split of a communication step into n equal RK4 steps: n = internal_step_count(step_size,
+ * max_internal_step), h = step_size / n, h / 2, h / 6 (the first lines of plant_integration.py's
+ * rk4_advance and rk4_advance_states, the same arithmetic).  A plant keeps the split of its step size:
+ * a master's communication step is the same at every doStep, and the divisions stay off the per-step path. */
+typedef struct {
+    double step_size, max_internal_step; /* what the split was made for */
+    long n;
+    double h, half, sixth;
+} Rk4Split;
+
+static inline Rk4Split rk4_split(double step_size, double max_internal_step) {
+    Rk4Split split = {step_size, max_internal_step, internal_step_count(step_size, max_internal_step), 0.0, 0.0, 0.0};
+    if (split.n == 0) return split;
+    split.h = step_size / (double)split.n;
+    split.half = 0.5 * split.h;
+    split.sixth = split.h / 6.0;
+    return split;
+}
+
+/* advance (x[0], x[1]) from t to t + step_size with u held, in the split's n equal RK4 steps h that start
+ * at t + i h (not at an accumulated sum) */
+static inline void rk4_advance(PlantDerivative derivative, double t, double x[2], double u, const Rk4Split *split,
+                               const double *params) {
+    long n = split->n;
+    double h = split->h, half = split->half, sixth = split->sixth;
     double x1 = x[0], x2 = x[1];
     for (long i = 0; i < n; i++) {
         double ti = t + (double)i * h;
@@ -53,12 +69,9 @@ static inline void rk4_advance(PlantDerivative derivative, double t, double x[2]
 
 /* advance the states x[0..states-1] like rk4_advance (with two states the same numbers, bit for bit) */
 static inline void rk4_advance_states(PlantDerivative derivative, double t, double x[], int states, double u,
-                                      double step_size, double max_internal_step, const double *params) {
-    long n = internal_step_count(step_size, max_internal_step);
-    if (n == 0) return;
-    double h = step_size / (double)n;
-    double half = 0.5 * h;
-    double sixth = h / 6.0;
+                                      const Rk4Split *split, const double *params) {
+    long n = split->n;
+    double h = split->h, half = split->half, sixth = split->sixth;
     double k1[PLANT_MAX_STATES], k2[PLANT_MAX_STATES], k3[PLANT_MAX_STATES], k4[PLANT_MAX_STATES];
     double stage[PLANT_MAX_STATES];
     for (long i = 0; i < n; i++) {

@@ -16,6 +16,7 @@ int model_initialize(ModelInstance *m, double start_time) {
     for (int s = 0; s < PLANT_STATES; s++) state->x[s] = m->s->values[VRS_x_start[s]];
     state->mode = 0.0;
     plant_params(m, state->params);
+    state->split = rk4_split(0.0, V(m, max_internal_step));
 #if PLANT_HAS_EVENTS /* the mode of the initial state (model exchange; co-simulation has none) */
     int changed = 0;
     state->mode = plant_mode_update(m, state->params, 0.0, state->x, &changed);
@@ -30,7 +31,9 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     double x[PLANT_STATES];
     int finite = 1;
     for (int s = 0; s < PLANT_STATES; s++) x[s] = state->x[s];
-    plant_advance(current_time, x, V(m, u), step_size, V(m, max_internal_step), state->params);
+    if (state->split.step_size != step_size || state->split.max_internal_step != V(m, max_internal_step))
+        state->split = rk4_split(step_size, V(m, max_internal_step));
+    plant_advance(current_time, x, V(m, u), &state->split, state->params);
     for (int s = 0; s < PLANT_STATES; s++) finite = finite && x[s] - x[s] == 0.0; /* not NaN or inf */
     if (!finite) {
         char start[512];

@@ -22,6 +22,7 @@ typedef struct {
     double x[PLANT_STATES];
     double mode;
     double params[PLANT_MAX_PARAMS];
+    Rk4Split split; /* the RK4 split of the last doStep's step size */
 } PlantState;
 
 #define PLANT(m) ((PlantState *)(m)->internal)
@@ -30,9 +31,10 @@ typedef struct {
 extern const PlantDerivative plant_derivative;
 /* the constants of plant_derivative from the current parameters (model_params) */
 void plant_params(ModelInstance *m, double *params);
-/* x from t to t + step_size with u held (RK4PlantSlave.step): rk4_advance (2 states) or rk4_advance_states
- * of plant_integration.h called with the plant's own derivative, which the compiler inlines there */
-void plant_advance(double t, double x[], double u, double step_size, double max_internal_step, const double *params);
+/* x over the split's communication step with u held (RK4PlantSlave.step): rk4_advance (2 states) or
+ * rk4_advance_states of plant_integration.h called with the plant's own derivative, which the compiler
+ * inlines there */
+void plant_advance(double t, double x[], double u, const Rk4Split *split, const double *params);
 
 /* a plant with events (model exchange): the mode that follows the state at time t (from
  * mode = 0 at the initial state), whether it resets states (*states_changed), the

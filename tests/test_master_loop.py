@@ -185,7 +185,11 @@ def test_an_fmi_error_stops_the_block_where_the_python_loop_stops(fmi_version, s
     outcome = system.run(0, 6)
     assert (outcome.outcome, outcome.row, outcome.index, outcome.status) == (outcome_kind, 2, action, status)
     assert system.trace[-1][0] == call  # nothing is called after the failing call
-    assert (system.record[:rows_recorded] != -1).all() and (system.record[rows_recorded:] == -1).all()
+    # the rows kept are recorded; nothing is written past the failing row (a read that fills its record columns
+    # itself may have written into the failing row, which the master does not keep)
+    assert (system.record[:rows_recorded] != -1).all() and (system.record[3:] == -1).all()
+    if call != "getB":
+        assert (system.record[rows_recorded:] == -1).all()
 
 
 @pytest.mark.parametrize("call", ["getA", "setB", "getB", "stepA", "stepB"])
@@ -229,6 +233,15 @@ def test_every_row_of_a_check_block_is_checked(row, stop_row):
         assert outcome.outcome == LoopOutcome.DONE
     else:
         assert (outcome.outcome, outcome.row) == (LoopOutcome.RECORD_DIVERGED, stop_row)
+
+
+@pytest.mark.parametrize("split", [1, 2, 3])
+def test_a_block_begun_by_an_earlier_call_is_checked_whole(split):
+    """Row 1 is beyond its bound; the block 0 .. 3 ends in the second call, which stops at its end."""
+    system = FakeSystem(2, rows=9, record_bounds=(1e6, 50.0), a0_override=(1, 1e300), bound2=float("inf"))
+    assert system.run(0, split, check_every=4).outcome == LoopOutcome.DONE
+    outcome = system.run(split, 9, check_every=4)
+    assert (outcome.outcome, outcome.row) == (LoopOutcome.RECORD_DIVERGED, 3)
 
 
 def test_blocks_continue_where_the_last_one_ended():

@@ -51,8 +51,8 @@ static void pendulum_derivative(double t, const double x[], double u, const doub
 const PlantDerivative plant_derivative = pendulum_derivative;
 
 /* co-simulation's step: RK4 with u held, pendulum_derivative inlined into its stages */
-void plant_advance(double t, double x[], double u, double step_size, double max_internal_step, const double *params) {
-    rk4_advance(pendulum_derivative, t, x, u, step_size, max_internal_step, params);
+void plant_advance(double t, double x[], double u, const Rk4Split *split, const double *params) {
+    rk4_advance(pendulum_derivative, t, x, u, split, params);
 }
 
 int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {

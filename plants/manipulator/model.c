@@ -56,8 +56,8 @@ static void manipulator_derivative(double t, const double x[], double u, const d
 const PlantDerivative plant_derivative = manipulator_derivative;
 
 /* co-simulation's step: RK4 with u held, manipulator_derivative inlined into its stages */
-void plant_advance(double t, double x[], double u, double step_size, double max_internal_step, const double *params) {
-    rk4_advance(manipulator_derivative, t, x, u, step_size, max_internal_step, params);
+void plant_advance(double t, double x[], double u, const Rk4Split *split, const double *params) {
+    rk4_advance(manipulator_derivative, t, x, u, split, params);
 }
 
 int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
