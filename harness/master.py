@@ -350,7 +350,10 @@ class Master:
         return plan
 
     def _before_loop(self, plan: list, record):
-        """What the loop needs made before it is timed: the compiled loop's plan (harness/master_loop.py)."""
+        """What the loop needs made before it is timed: the record's memory touched (its pages are the
+        system's to map before the first row is written, not during the loop) and the compiled loop's plan
+        (harness/master_loop.py)."""
+        record.fill(0.0)
         self._compiled = None
         if self._compiled_loop is not None:
             self._compiled = master_loop.CompiledLoop(self._compiled_loop, plan, list(self.components.values()),
@@ -362,11 +365,8 @@ class Master:
         last rows against their bounds itself (the compiled loop does)."""
         scenario = self.scenario
         steps = scenario.steps
-        if self._compiled is not None:
+        if self._compiled is not None:  # the last block's call ends with the last communication point
             self._loop_compiled(self._compiled, plan, record, progress, every)
-            outcome = self._compiled.finish(steps)
-            if outcome.outcome != LoopOutcome.DONE:
-                self._raise_stop(outcome, plan, list(self.components.values()), record)
             self.rows_done = steps + 1
             return True
         self._loop_python(plan, record, progress, every)
@@ -429,7 +429,7 @@ class Master:
             else:
                 last = min(steps, n + block)
             began = clock.perf_counter()
-            outcome = loop.run(start, step, n, last)
+            outcome = loop.run(start, step, n, last, steps)
             if outcome.outcome != LoopOutcome.DONE:
                 self._raise_stop(outcome, plan, components, record)
             if progress is not None and not every:

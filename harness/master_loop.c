@@ -213,9 +213,15 @@ static int run_rows(const Action *plan, size_t actions, const RowPlan *rows, con
     return LOOP_DONE;
 }
 
+EXPORT int master_loop_finish(const Action *plan, size_t actions, int64_t steps, double *record, size_t columns,
+                              const double *column_bounds, int64_t check_every, Outcome *outcome);
+
+/* rows first_row .. last_row - 1; when last_row is `steps`, then the last communication point too
+ * (master_loop_finish: one call for a whole run; steps < 0: never) */
 EXPORT int master_loop_run(const Action *plan, size_t actions, const Stepper *steppers, size_t stepper_count,
-                           double start, double step, int64_t first_row, int64_t last_row, double *record,
-                           size_t columns, const double *column_bounds, int64_t check_every, Outcome *outcome) {
+                           double start, double step, int64_t first_row, int64_t last_row, int64_t steps,
+                           double *record, size_t columns, const double *column_bounds, int64_t check_every,
+                           Outcome *outcome) {
     memset(outcome, 0, sizeof *outcome);
     RowPlan rows;
     if (!make_row_plan(plan, actions, columns, column_bounds, &rows)) {
@@ -225,6 +231,8 @@ EXPORT int master_loop_run(const Action *plan, size_t actions, const Stepper *st
     int what = run_rows(plan, actions, &rows, steppers, stepper_count, start, step, first_row, last_row, record,
                         columns, column_bounds, check_every, outcome);
     free(rows.memory);
+    if (what == LOOP_DONE && last_row == steps)
+        what = master_loop_finish(plan, actions, steps, record, columns, column_bounds, check_every, outcome);
     return what;
 }
 

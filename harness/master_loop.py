@@ -28,7 +28,7 @@ def _declare(library):
     function = library.master_loop_run
     function.restype = ctypes.c_int
     function.argtypes = [ctypes.POINTER(Action), ctypes.c_size_t, ctypes.POINTER(Stepper), ctypes.c_size_t,
-                         ctypes.c_double, ctypes.c_double, ctypes.c_int64, ctypes.c_int64, _double_p,
+                         ctypes.c_double, ctypes.c_double, ctypes.c_int64, ctypes.c_int64, ctypes.c_int64, _double_p,
                          ctypes.c_size_t, _double_p, ctypes.c_int64, ctypes.POINTER(Outcome)]
     finish = library.master_loop_finish
     finish.restype = ctypes.c_int
@@ -68,10 +68,11 @@ class CompiledLoop:
         self.check_every = check_every
         self.outcome = Outcome()
 
-    def run(self, start: float, step: float, first_row: int, last_row: int) -> Outcome:
-        """Rows first_row .. last_row - 1; the Outcome says whether all ran or what stopped them."""
+    def run(self, start: float, step: float, first_row: int, last_row: int, steps: int = -1) -> Outcome:
+        """Rows first_row .. last_row - 1, and the last communication point too when last_row is ``steps``; the
+        Outcome says whether all ran or what stopped them."""
         self.function(self.actions, len(self.actions), self.steppers, len(self.steppers), start, step,
-                      first_row, last_row, self._record, self.columns, self._bounds, self.check_every,
+                      first_row, last_row, steps, self._record, self.columns, self._bounds, self.check_every,
                       ctypes.byref(self.outcome))
         return self.outcome
 

@@ -116,10 +116,10 @@ class FakeSystem:
         self.trace.append((f"step{name}", time, step))
         return self._status(f"step{name}")
 
-    def run(self, first_row: int, last_row: int, start=0.1, step=0.0005, check_every=4) -> Outcome:
+    def run(self, first_row: int, last_row: int, start=0.1, step=0.0005, check_every=4, steps=-1) -> Outcome:
         function = master_loop.library("c").master_loop_run
         outcome = Outcome()
-        function(self.actions, 3, self.steppers, 2, start, step, first_row, last_row,
+        function(self.actions, 3, self.steppers, 2, start, step, first_row, last_row, steps,
                  self.record.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 2,
                  ctypes.cast(self.column_bounds, ctypes.POINTER(ctypes.c_double)), check_every, ctypes.byref(outcome))
         return outcome
@@ -152,6 +152,18 @@ def test_the_last_communication_point_is_the_plans_pass_and_the_check_of_the_row
     failing = FakeSystem(fmi_version, rows=11, fail=("getA", 0, 3))
     failed = failing.finish(10)
     assert (failed.outcome, failed.row, failed.index, failed.status) == (LoopOutcome.READ_FAILED, 10, 0, 3)
+
+
+def test_a_call_that_reaches_the_last_row_ends_with_the_last_communication_point():
+    """master_loop_run with last_row = steps: the rows, then master_loop_finish's pass, in one call."""
+    whole, parts = FakeSystem(2, rows=11), FakeSystem(2, rows=11)
+    assert whole.run(0, 10, steps=10).outcome == LoopOutcome.DONE
+    assert parts.run(0, 10).outcome == LoopOutcome.DONE and parts.finish(10).outcome == LoopOutcome.DONE
+    assert whole.trace == parts.trace and whole.trace[-1][0] == "getB"  # no doStep after the last row
+    assert np.array_equal(whole.record, parts.record)
+    assert FakeSystem(2, rows=11).run(0, 6, steps=10).outcome == LoopOutcome.DONE  # a block before the end: rows only
+    failing = FakeSystem(2, rows=11, fail=("getA", 10, 3)).run(0, 10, steps=10)
+    assert (failing.outcome, failing.row, failing.index) == (LoopOutcome.READ_FAILED, 10, 0)
 
 
 @pytest.mark.parametrize("fmi_version", [2, 3])
@@ -414,9 +426,9 @@ def _counted_blocks(monkeypatch) -> list:
     blocks = []
     run = master_loop.CompiledLoop.run
 
-    def counted(self, start, step, first_row, last_row):
+    def counted(self, start, step, first_row, last_row, steps=-1):
         blocks.append((first_row, last_row))
-        return run(self, start, step, first_row, last_row)
+        return run(self, start, step, first_row, last_row, steps)
 
     monkeypatch.setattr(master_loop.CompiledLoop, "run", counted)
     return blocks
