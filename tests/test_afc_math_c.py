@@ -12,7 +12,7 @@ import pytest
 
 from harness.fmu_build import native as build_native
 from harness.fmu_build.native_stages import compiler
-from fmu_src import afc_math
+from fmu_src import afc_math, chatter_monitor
 from harness import variants
 
 MAX_ORDER = 4
@@ -528,3 +528,20 @@ def test_the_native_controller_fmu_is_the_python_one_at_any_order(fmu_paths, nat
             c.free()
     assert traces[0] == traces[1]
     assert traces[0][-1] != traces[0][1]  # theta learned
+
+
+def test_the_chatter_verdict_next_to_the_threshold_is_the_python_editions(afc):
+    """States whose statistic lies within a relative 1e-8 of 20 Hz, on both sides (where the C test first compares
+    the averages without dividing): the C twin warns exactly when chatter_monitor.update does."""
+    afc.chatter_update.restype = ctypes.c_int
+    h, u = 1e-4, 3.0  # u = the previous u = the magnitude: only the variation rate moves, by the factor 1 - h
+    line = chatter_monitor.THRESHOLD_HZ * 2.0 * math.pi * u / (1.0 - h)
+    verdicts = set()
+    for relative in np.linspace(-1e-8, 1e-8, 401):
+        python = [u, line * (1.0 + relative), u, 2.0, 1.0, 0.0]  # PREVIOUS_U, VARIATION_RATE, MAGNITUDE, ...
+        c = Chatter(*python)
+        expected = chatter_monitor.update(python, u, h)
+        assert afc.chatter_update(ctypes.byref(c), ctypes.c_double(u), ctypes.c_double(h)) == expected, relative
+        assert (c.variation_rate, c.magnitude, c.warned) == (python[1], python[2], python[5])
+        verdicts.add(expected)
+    assert verdicts == {True, False}  # the threshold was crossed inside the window
