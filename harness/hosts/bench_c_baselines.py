@@ -23,6 +23,7 @@ import os
 import re
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 
 from .. import scenario as scenarios
 from ..master import Master
@@ -104,10 +105,16 @@ def measure(native: dict, horizons_s=HORIZONS, repeat: int = 3, cold: bool = Tru
     return rows
 
 
-def instructions(short: float = 1.0, long: float = 3.0) -> dict:
-    """{loop: {category: instructions per step, "total": ...}} of ours, the C host and the floor (callgrind)."""
+def instructions(short: float = 1.0, long: float = 3.0, jobs: int = 2) -> dict:
+    """{loop: {category: instructions per step, "total": ...}} of ours, the C host and the floor (callgrind; the
+    six counted runs on ``jobs`` processes at a time)."""
     names = {"ours": "master", "host": "host", "floor": "floor"}
-    return {loop: instruction_counts.per_step(names[loop], short, long) for loop in LOOPS}
+    instruction_counts.native_fmus()  # built before any count
+    runs = [(names[loop], stop) for loop in LOOPS for stop in (short, long)]
+    with ThreadPoolExecutor(jobs) as pool:
+        counted = dict(zip(runs, pool.map(lambda run: instruction_counts.count(*run), runs)))
+    return {loop: instruction_counts.per_step(names[loop], short, long, counts=lambda name, stop: counted[(name, stop)])
+            for loop in LOOPS}
 
 
 def print_section(rows: list, repeat: int, counts: dict | None = None, stream=None) -> None:
