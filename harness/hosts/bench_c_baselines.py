@@ -149,8 +149,9 @@ def print_section(rows: list, repeat: int, counts: dict | None = None, stream=No
         print(f"  {'loop':>8s} {'total':>7s} {'libm':>7s} {'FMUs':>7s} {'loop C':>7s} {'other':>7s}", file=stream)
         for loop in LOOPS:
             figures = counts[loop]
-            print(f"  {loop:>8s} {figures['total']:7.0f} {figures['libm']:7.0f} {figures['fmus']:7.0f} "
-                  f"{figures['loop']:7.0f} {figures['other']:7.0f}", file=stream)
+            whole = {key: int(round(value)) for key, value in figures.items()}  # no "-0" for a difference of 0
+            print(f"  {loop:>8s} {whole['total']:7d} {whole['libm']:7d} {whole['fmus']:7d} {whole['loop']:7d} "
+                  f"{whole['other']:7d}", file=stream)
         print(f"  instructions: ours / C host {counts['ours']['total'] / counts['host']['total']:.2f}, "
               f"C host / floor {counts['host']['total'] / counts['floor']['total']:.2f}", file=stream)
 
