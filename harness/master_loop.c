@@ -41,6 +41,12 @@
 
 #include "loop_interface.h"
 
+#if defined(__GNUC__)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE inline
+#endif
+
 /* the doStep of FMI 2.0 and FMI 3.0 */
 typedef int (*Fmi2DoStep)(void *instance, double time, double step, int no_prior_state);
 typedef int (*Fmi3DoStep)(void *instance, double time, double step, bool no_prior_state, bool *event_needed,
@@ -62,15 +68,22 @@ static int do_step(const Stepper *s, double time, double step) {
  *   itself, and the writes take those values from the row;
  * - the test of the recorded values against their bounds leaves out a value that a write later in the
  *   pass tests against a bound no larger than its column's: a value beyond its column's bound has already
- *   stopped the row on its way to an input. */
+ *   stopped the row on its way to an input;
+ * - lean, the usual shape (every FMU of FMI 2.0, every read filling the row, every copy from it): the rows run
+ *   without the tests of the other shapes. */
+typedef struct {
+    size_t column;
+    double bound;
+} Check;
+
 typedef struct {
     unsigned char *direct;   /* per action: a read that fills its record columns itself */
     const double **from;     /* per copy of the writes, in plan order: where its value is, outside the row */
     int64_t *column;         /* ... or its column in the row (-1: `from`) */
-    size_t *checked;         /* the columns the block check tests */
-    double *checked_bounds;  /* ... and their bounds */
-    size_t checks;
+    Check *checks;           /* the columns the block check tests, with their bounds */
+    size_t check_count;
     int copies_after;        /* some read's recorded values are copied into the row after the pass */
+    int lean;                /* the usual shape: FMI 2.0 throughout, every read fills the row, every copy is from it */
     void *memory;
 } RowPlan;
 
@@ -79,16 +92,14 @@ static int make_row_plan(const Action *plan, size_t actions, size_t columns, con
     size_t copies = 0;
     for (size_t i = 0; i < actions; i++)
         if (plan[i].kind == ACTION_WRITE) copies += plan[i].count;
-    size_t bytes = copies * (sizeof(double *) + sizeof(int64_t)) + columns * (sizeof(double) + sizeof(size_t) + 1) +
-                   actions + 64;
+    size_t bytes = columns * sizeof(Check) + copies * (sizeof(double *) + sizeof(int64_t)) + columns + actions + 64;
     char *memory = (char *)calloc(1, bytes);
     if (!memory) return 0;
     rows->memory = memory;
-    rows->from = (const double **)memory;
-    rows->column = (int64_t *)(memory + copies * sizeof(double *));
-    rows->checked_bounds = (double *)(memory + copies * (sizeof(double *) + sizeof(int64_t)));
-    rows->checked = (size_t *)(rows->checked_bounds + columns);
-    rows->direct = (unsigned char *)(rows->checked + columns);
+    rows->checks = (Check *)memory;
+    rows->from = (const double **)(memory + columns * sizeof(Check));
+    rows->column = (int64_t *)(rows->from + copies);
+    rows->direct = (unsigned char *)(rows->column + copies);
     unsigned char *covered = rows->direct + actions; /* per column: tested on its way to an input */
     rows->copies_after = 0;
     for (size_t i = 0; i < actions; i++) {
@@ -112,40 +123,46 @@ static int make_row_plan(const Action *plan, size_t actions, size_t columns, con
             }
         }
     }
-    rows->checks = 0;
+    rows->check_count = 0;
     for (size_t i = 0; i < actions; i++) {
         const Action *a = &plan[i];
         if (a->kind != ACTION_READ) continue;
         for (size_t c = a->first_column; c < a->first_column + a->recorded; c++)
             if (!covered[c]) {
-                rows->checked_bounds[rows->checks] = column_bounds[c];
-                rows->checked[rows->checks++] = c;
+                rows->checks[rows->check_count].column = c;
+                rows->checks[rows->check_count++].bound = column_bounds[c];
             }
     }
+    rows->lean = 1;
+    for (size_t i = 0; i < actions; i++)
+        rows->lean &= plan[i].fmi_version == 2 && (plan[i].kind != ACTION_READ || rows->direct[i]);
+    for (size_t k = 0; k < copies; k++) rows->lean &= rows->column[k] >= 0;
     return 1;
 }
 
-/* the getReal or setReal of an action into (or from) `values` */
-static inline int action_call_with(const Action *a, double *values) {
-    if (a->fmi_version == 3)
+/* the getReal or setReal of an action into (or from) `values` (lean: FMI 2.0) */
+static ALWAYS_INLINE int action_call_with(const Action *a, double *values, const int lean) {
+    if (!lean && a->fmi_version == 3)
         return ((Fmi3ArrayCall)a->call)(a->instance, a->references, a->count, values, a->count);
     return ((Fmi2ArrayCall)a->call)(a->instance, a->references, a->count, values);
 }
 
 /* run_plan for one row of the record, with the rows' plan; the values not read into the row itself are
- * copied there afterwards (record_reads); returns LOOP_DONE or what stopped it, as run_plan */
-static inline int run_row(const Action *plan, size_t actions, const RowPlan *rows, double *row, Outcome *outcome) {
+ * copied there afterwards (record_reads); returns LOOP_DONE or what stopped it, as run_plan.  `lean` (a
+ * constant where it is inlined): the rows' plan is lean, the tests it makes true are left out */
+static ALWAYS_INLINE int run_row(const Action *plan, size_t actions, const RowPlan *rows, double *row,
+                                 Outcome *outcome, const int lean) {
     size_t copy = 0;
     for (size_t i = 0; i < actions; i++) {
         const Action *a = &plan[i];
         if (a->kind == ACTION_READ) {
-            int status = action_call_with(a, rows->direct[i] ? row + a->first_column : a->values);
+            int status = action_call_with(a, lean || rows->direct[i] ? row + a->first_column : a->values, lean);
             if (status > STATUS_WARNING) return loop_stop(outcome, LOOP_READ_FAILED, (int64_t)i, status);
             continue;
         }
         for (size_t k = 0; k < a->count; k++, copy++) {
             int64_t column = rows->column[copy];
-            double value = column >= 0 ? row[column] : *rows->from[copy];
+            double value = lean || column >= 0 ? row[column] : *rows->from[copy];
             if (!(fabs(value) < a->bounds[k])) {
                 outcome->copy = (int64_t)k;
                 outcome->value = value;
@@ -153,10 +170,10 @@ static inline int run_row(const Action *plan, size_t actions, const RowPlan *row
             }
             a->values[k] = value;
         }
-        int status = action_call_with(a, a->values);
+        int status = action_call_with(a, a->values, lean);
         if (status > STATUS_WARNING) return loop_stop(outcome, LOOP_WRITE_FAILED, (int64_t)i, status);
     }
-    if (!rows->copies_after) return LOOP_DONE;
+    if (lean || !rows->copies_after) return LOOP_DONE;
     for (size_t i = 0; i < actions; i++) {
         const Action *a = &plan[i];
         if (a->kind == ACTION_READ && a->recorded && !rows->direct[i])
@@ -168,11 +185,10 @@ static inline int run_row(const Action *plan, size_t actions, const RowPlan *row
 /* the block check's test of one recorded row (record_within_bounds on the columns the rows' plan keeps):
  * whether a value is not below its bound (!(|v| < bound), NaN too) */
 static inline int row_beyond(const RowPlan *rows, const double *row) {
-    int beyond = 0;
-    const size_t *checked = rows->checked;
-    const double *bounds = rows->checked_bounds;
-    for (size_t c = 0, checks = rows->checks; c < checks; c++) beyond |= !(fabs(row[checked[c]]) < bounds[c]);
-    return beyond;
+    const Check *check = rows->checks;
+    for (size_t c = 0, count = rows->check_count; c < count; c++)
+        if (!(fabs(row[check[c].column]) < check[c].bound)) return 1;
+    return 0;
 }
 
 static int run_rows(const Action *plan, size_t actions, const RowPlan *rows, const Stepper *steppers,
@@ -186,7 +202,8 @@ static int run_rows(const Action *plan, size_t actions, const RowPlan *rows, con
     for (int64_t n = first_row; n < last_row; n++) {
         double t = start + (double)n * step;
         double *row = record + (size_t)n * columns;
-        int what = run_row(plan, actions, rows, row, outcome);
+        int what = rows->lean ? run_row(plan, actions, rows, row, outcome, 1)
+                              : run_row(plan, actions, rows, row, outcome, 0);
         if (what != LOOP_DONE) {
             outcome->row = n;
             return what;
