@@ -52,8 +52,8 @@ typedef int (*Fmi2DoStep)(void *instance, double time, double step, int no_prior
 typedef int (*Fmi3DoStep)(void *instance, double time, double step, bool no_prior_state, bool *event_needed,
                           bool *terminate, bool *early_return, double *last_successful_time);
 
-static int do_step(const Stepper *s, double time, double step) {
-    if (s->fmi_version == 3) {
+static ALWAYS_INLINE int do_step(const Stepper *s, double time, double step, const int lean) {
+    if (!lean && s->fmi_version == 3) {
         bool event_needed = false, terminate = false, early_return = false;
         double last_successful_time = 0.0;
         return ((Fmi3DoStep)s->do_step)(s->instance, time, step, true, &event_needed, &terminate, &early_return,
@@ -191,10 +191,12 @@ static inline int row_beyond(const RowPlan *rows, const double *row) {
     return 0;
 }
 
-static int run_rows(const Action *plan, size_t actions, const RowPlan *rows, const Stepper *steppers,
-                    size_t stepper_count, double start, double step, int64_t first_row, int64_t last_row,
-                    double *record, size_t columns, const double *column_bounds, int64_t check_every,
-                    Outcome *outcome) {
+/* rows first_row .. last_row - 1; `lean` (a constant where it is inlined): the rows' plan is lean and every
+ * stepper of FMI 2.0 */
+static ALWAYS_INLINE int run_rows(const Action *plan, size_t actions, const RowPlan *rows, const Stepper *steppers,
+                                  size_t stepper_count, double start, double step, int64_t first_row,
+                                  int64_t last_row, double *record, size_t columns, const double *column_bounds,
+                                  int64_t check_every, Outcome *outcome, const int lean) {
     int64_t to_check = check_every - (first_row + 1) % check_every; /* rows left until (n + 1) % check_every == 0 */
     if (to_check == check_every) to_check = 0;
     int beyond = 0;                                         /* a recorded value of this block is beyond its bound */
@@ -202,8 +204,7 @@ static int run_rows(const Action *plan, size_t actions, const RowPlan *rows, con
     for (int64_t n = first_row; n < last_row; n++) {
         double t = start + (double)n * step;
         double *row = record + (size_t)n * columns;
-        int what = rows->lean ? run_row(plan, actions, rows, row, outcome, 1)
-                              : run_row(plan, actions, rows, row, outcome, 0);
+        int what = run_row(plan, actions, rows, row, outcome, lean);
         if (what != LOOP_DONE) {
             outcome->row = n;
             return what;
@@ -220,7 +221,7 @@ static int run_rows(const Action *plan, size_t actions, const RowPlan *rows, con
             }
         }
         for (size_t s = 0; s < stepper_count; s++) {
-            int status = do_step(&steppers[s], t, step);
+            int status = do_step(&steppers[s], t, step, lean);
             if (status > STATUS_WARNING) {
                 outcome->row = n;
                 return loop_stop(outcome, LOOP_STEP_FAILED, (int64_t)s, status);
@@ -245,8 +246,12 @@ EXPORT int master_loop_run(const Action *plan, size_t actions, const Stepper *st
         outcome->row = first_row;
         return loop_stop(outcome, LOOP_OUT_OF_MEMORY, -1, 0);
     }
-    int what = run_rows(plan, actions, &rows, steppers, stepper_count, start, step, first_row, last_row, record,
-                        columns, column_bounds, check_every, outcome);
+    int lean = rows.lean;
+    for (size_t s = 0; s < stepper_count; s++) lean &= steppers[s].fmi_version == 2;
+    int what = lean ? run_rows(plan, actions, &rows, steppers, stepper_count, start, step, first_row, last_row,
+                               record, columns, column_bounds, check_every, outcome, 1)
+                    : run_rows(plan, actions, &rows, steppers, stepper_count, start, step, first_row, last_row,
+                               record, columns, column_bounds, check_every, outcome, 0);
     free(rows.memory);
     if (what == LOOP_DONE && last_row == steps)
         what = master_loop_finish(plan, actions, steps, record, columns, column_bounds, check_every, outcome);
