@@ -45,6 +45,9 @@ class ModelExchange:
     event_indicators: tuple = ()
     locals: tuple = ()  # ((name, description), ...)
     reinit: tuple = ()
+    # the model announces time events: its event update gives the next event time (a sampled FMU's
+    # next sample instant); the C model file then defines model_next_event_time (fmi_layer.h)
+    time_events: bool = False
 
     @property
     def states(self) -> tuple:

@@ -619,6 +619,18 @@ static Status me_update_discrete_states(ModelInstance *m, int *states_changed, c
     return STATUS_OK;
 }
 
+/* the next time event the model announces after an event update (a sampled model's next sample
+ * instant: ModelExchange.time_events, model_next_event_time); 0 when it announces none */
+static int next_event_time(ModelInstance *m, double *time) {
+    *time = 0.0;
+#if MODEL_TIME_EVENTS
+    return model_next_event_time(m, time);
+#else
+    (void)m;
+    return 0;
+#endif
+}
+
 static Status me_enter_event_mode(ModelInstance *m, const char *call) {
     ME_CHECK(call, MODE_EVENT | MODE_CONTINUOUS);
     m->mode = MODE_EVENT;
@@ -796,8 +808,9 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo) {
     eventInfo->terminateSimulation = fmi2False;
     eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
     eventInfo->valuesOfContinuousStatesChanged = changed ? fmi2True : fmi2False;
-    eventInfo->nextEventTimeDefined = fmi2False;
-    eventInfo->nextEventTime = 0.0;
+    double next = 0.0;
+    eventInfo->nextEventTimeDefined = status == fmi2OK && next_event_time(M, &next) ? fmi2True : fmi2False;
+    eventInfo->nextEventTime = next;
     return status;
 }
 fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) {
@@ -1187,8 +1200,10 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     if (terminateSimulation) *terminateSimulation = fmi3False;
     if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = fmi3False;
     if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = changed ? fmi3True : fmi3False;
-    if (nextEventTimeDefined) *nextEventTimeDefined = fmi3False;
-    if (nextEventTime) *nextEventTime = 0.0;
+    double next = 0.0;
+    int defined = status == fmi3OK && next_event_time(M, &next);
+    if (nextEventTimeDefined) *nextEventTimeDefined = defined ? fmi3True : fmi3False;
+    if (nextEventTime) *nextEventTime = next;
     return status;
 }
 

@@ -42,7 +42,7 @@ typedef struct {
 /* generated: MODEL_IDENTIFIER, MODEL_GUID, N_VARIABLES, VR_<name>, MODEL_FEEDTHROUGH,
  * MODEL_VARIABLES[] (the table); for model exchange N_STATES, N_EVENT_INDICATORS, N_LOCALS and
  * the value references of the variables the description adds after the table (FMI 3.0's time
- * is N_VARIABLES): der(<state>) from VR_FIRST_DERIVATIVE, the event indicators from
+ * is N_VARIABLES), MODEL_TIME_EVENTS (the model announces time events): der(<state>) from VR_FIRST_DERIVATIVE, the event indicators from
  * VR_FIRST_EVENT_INDICATOR, the model's other locals from VR_FIRST_LOCAL, names in EXTRA_NAMES[] */
 #include "model_variables.h"
 
@@ -105,6 +105,11 @@ int model_get_derivatives(ModelInstance *m, double dx[]);
 int model_get_event_indicators(ModelInstance *m, double z[]);
 int model_get_locals(ModelInstance *m, double values[]);
 int model_update_discrete_states(ModelInstance *m, int *states_changed);
+#if MODEL_TIME_EVENTS
+/* a model that declares time events (ModelExchange.time_events, MODEL_TIME_EVENTS of the generated header):
+ * after its event update, 1 and *time = its next event time (model exchange), or 0 for none */
+int model_next_event_time(ModelInstance *m, double *time);
+#endif
 
 /* A function that only builds and logs a message (a failure, a warning): compiled apart from its caller,
  * so that the caller's per-step path carries none of its buffers. */

@@ -17,10 +17,7 @@ exception: a study of many cases goes on.  :func:`run_cases` runs many on a proc
 from __future__ import annotations
 
 import functools
-import multiprocessing
-import os
 import time as clock
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,9 +25,10 @@ import numpy as np
 
 from harness.fmu_build import builder as build_fmu
 
-from . import master_loop, me_loop, me_master, termination
+from . import master_loop, me_loop, me_master
 from . import progress as progress_module
 from . import scenario as scenarios
+from .executors import default_jobs, open_executor
 from .fmi import FmiError
 from .master import ALGORITHMS as CO_SIMULATION_ALGORITHMS
 from .master import Divergence, SimulationFailed, simulate
@@ -182,71 +180,50 @@ def run_case(case: Case, fmu_paths: dict | None = None) -> dict:
     return outcome
 
 
-def default_jobs() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
 def _run_item(function, index: int, item):
-    """One item in a worker: its progress goes to its slot of the board; a SIGTERM ends the worker after it."""
+    """One item in a worker: its progress goes to its slot of the board."""
     progress_module.set_item(index)
     try:
         return function(item)
     finally:
         progress_module.set_item(None)
-        termination.exit_if_stopped()
-
-
-def _start_worker(fractions):
-    termination.worker_signals()
-    progress_module.attach(fractions)
 
 
 def parallel_map(function, items: list, jobs: int | None = None, description: str = "",
                  progress: bool | None = False, label=None, weights=None, unit: str = "") -> list:
     """[function(item) for item in items] on ``jobs`` processes (default every core), in order.
 
-    Workers are spawned, clean interpreters: loaded FMUs (and Ecos's threads) never cross a
-    fork.  ``function`` must be picklable (a module-level function or a functools.partial).
+    The executor layer runs them (harness/executors/: workers are spawned, clean interpreters, so
+    loaded FMUs (and Ecos's threads) never cross a fork; they end with the command, SIGKILL included;
+    the items of a lost worker run again).  ``function`` must be picklable (a module-level function
+    or a functools.partial).
     ``progress`` (None or True: on; False: off) is a :class:`Progress` on stderr: a bar on a
     terminal, lines elsewhere; ``label(item)`` names a finished item in those lines.  ``weights``:
     each item's work in ``unit`` (a co-simulation's steps; default 1 per item), which the time left is
     estimated from, with the fractions ``function`` reports through harness.progress.step_reporter.
-    A KeyboardInterrupt (Ctrl-C, or SIGTERM as harness.termination.Terminated) ends the workers.
+    A KeyboardInterrupt (Ctrl-C, or SIGTERM as harness.termination.Terminated) ends the workers; an
+    item that raised raises here.
     """
-    jobs = max(1, min(len(items), jobs or default_jobs()))
     results = [None] * len(items)
     name = label or (lambda item: "")
     board = WorkBoard(weights if weights is not None else [1] * len(items), unit if weights is not None else "")
-    with Progress(len(items), description or "runs", enabled=progress is not False, board=board,
-                  workers=jobs) as bar:
-        if jobs == 1:
-            outer = progress_module.attach(board.fractions), progress_module.set_item(None)
-            try:
-                for index, item in enumerate(items):
-                    progress_module.set_item(index)
-                    results[index] = function(item)
-                    board.finish(index)
-                    bar.update(label=name(item))
-            finally:
-                progress_module.attach(outer[0])
-                progress_module.set_item(outer[1])
-            return results
-        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_start_worker, initargs=(board.fractions,))
-        try:
-            futures = {pool.submit(_run_item, function, index, item): index for index, item in enumerate(items)}
-            pending = set(futures)
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    index = futures[future]
-                    results[index] = future.result()
-                    board.finish(index)
-                    bar.update(label=name(items[index]))
-        except BaseException:
-            termination.end_workers(pool)
-            raise
-        pool.shutdown(wait=True)
+    outer = progress_module.attach(board.fractions), progress_module.set_item(None)
+    try:
+        executor = open_executor(jobs, tasks=len(items), inline_single=True, initializer=progress_module.attach,
+                                 initargs=(board.fractions,))
+        with Progress(len(items), description or "runs", enabled=progress is not False, board=board,
+                      workers=executor.slots) as bar, executor:
+            for index, item in enumerate(items):
+                executor.submit(functools.partial(_run_item, function, index), item, key=index)
+            for done in executor.as_completed():
+                if done.error is not None:
+                    raise done.error
+                results[done.key] = done.value
+                board.finish(done.key)
+                bar.update(label=name(items[done.key]))
+    finally:
+        progress_module.attach(outer[0])
+        progress_module.set_item(outer[1])
     return results
 
 

@@ -23,7 +23,7 @@ from .master import SimulationFailed
 from .me_master import ALGORITHM as MODEL_EXCHANGE
 from .me_master import DEFAULT_RTOL
 from .scores import SCORE_KEYS, score_run, value_text, why_none
-from .studies import compat, me_accuracy, mutation, regression, step_study, sweep, tables, tune, work_precision
+from .studies import compat, hardware, me_accuracy, mutation, regression, step_study, sweep, tables, tune, work_precision
 
 
 def _progress(total: int, description: str, enabled: bool):
@@ -43,7 +43,7 @@ def run_command(args) -> int:
     if not me and (args.rtol is not None or args.atol is not None):
         raise cli_args.UsageError(f"--rtol and --atol are tolerances of --algorithm me; --algorithm {args.algorithm} "
                                   "has a communication step (--step)")
-    scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop)
+    scenario = scenarios.configure(args.scenario, args.controller, args.step, args.stop, hardware=args.hardware)
     cli_args.check_output_interval(args.output_interval, scenario.step)
     if args.out:
         cli_args.check_writable([args.out])
@@ -110,6 +110,9 @@ def register_run(commands):
     run.add_argument("--step", type=cli_args.positive_float,
                      help="communication step in s (default: the scenario's); with --algorithm me the output interval")
     run.add_argument("--stop", type=cli_args.positive_float, help="stop time in s (default: the scenario's)")
+    run.add_argument("--hardware", metavar="FILE", type=cli_args.existing_file,
+                     help="a TOML file with a [hardware] table: a sensor and an actuator inserted between the plant "
+                          "and the controller (docs/master.md, Hardware in the loop)")
     run.add_argument("--algorithm", choices=ALGORITHMS, default="feedthrough",
                      help="feedthrough: no delay along direct-feedthrough chains (default); "
                           "jacobi: every connection delayed one step; me: Model Exchange, no communication step "
@@ -127,7 +130,7 @@ def register_run(commands):
 
 #: every subcommand, in the order of ``--help``: each lives in its own module with a ``register(commands)``
 SUBCOMMAND_REGISTRATIONS = (register_run, tables.register, step_study.register, me_accuracy.register,
-                            work_precision.register, sweep.register, regression.register, ssp.register,
+                            work_precision.register, sweep.register, hardware.register, regression.register, ssp.register,
                             engines.register, bench.register, mutation.register, matrix.register, tune.register,
                             compat.register)
 

@@ -27,6 +27,7 @@ from .fmi import FmiError, FmuFileError
 from .master import SimulationFailed, simulate
 from .scenario import ScenarioError
 from .scenario_checks import model_info
+from .unpack import ArchiveError
 
 USAGE_EXIT = 2  # a mistake in the command line or in a scenario file
 FAILED_EXIT = 1  # the command ran and failed (a diverged or crashed run, a failing regression)
@@ -361,7 +362,7 @@ def one_line(error: BaseException) -> str:
 
 def exit_status(error: BaseException) -> int:
     """2 for a usage mistake (also a parameter the FMU rejects when initialisation ends), else 1."""
-    if isinstance(error, (UsageError, ScenarioError, FmuFileError)):
+    if isinstance(error, (UsageError, ScenarioError, FmuFileError, ArchiveError)):
         return USAGE_EXIT
     fmi = _fmi_error(error)
     if fmi is not None and fmi.function == "fmi2ExitInitializationMode" and \

@@ -12,21 +12,21 @@ per process for callers that run the same FMUs many times.
 """
 from __future__ import annotations
 
-import atexit
 import ctypes
 import functools
-import os
-import shutil
-import tempfile
+import re
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Real,
                        fmi2ValueReference)
 from fmpy.fmi2 import defaultCallbacks as _fmpy_default_callbacks
 from fmpy.fmi3 import FMU3Model, FMU3Slave, fmi3Boolean, fmi3Float64
+
+from . import unpack
+from .unpack import process_alive
 
 STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal", "pending")
 FMI3_TYPE_NAMES = {"Float64": "Real", "Int32": "Integer"}
@@ -85,6 +85,21 @@ def check_fmu_file(path: Path) -> None:
         held = ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
         raise FmuFileError(f"{path} is not an FMU: no modelDescription.xml in the zip archive "
                            f"(it holds {held or 'nothing'})")
+    try:  # before any of it is read: sizes, links, paths (harness/unpack.py)
+        unpack.check_archive(path)
+    except unpack.ArchiveError as error:
+        raise FmuFileError(str(error)) from None
+
+
+def _description_problem(error: BaseException) -> str:
+    """What fmpy or lxml said of a model description, on one line, without the path lxml reads it from
+    (a folder of fmpy's or the working directory: not where the user's file is)."""
+    text = " | ".join(line.strip() for line in str(error).splitlines() if line.strip()) or type(error).__name__
+    text = re.sub(r"Error reading file '[^']*':\s*", "", text)
+    text = re.sub(r"'?[^\s']*modelDescription\.xml'?", "modelDescription.xml", text)
+    if "encoding" in text.lower():
+        text += " (FMI model descriptions are UTF-8 XML)"
+    return text
 
 
 @dataclass
@@ -115,8 +130,8 @@ class ModelInfo:
         try:
             md = read_model_description(str(path))
         except Exception as error:  # noqa: BLE001 - fmpy raises what lxml or its own checks raise
-            text = " | ".join(line.strip() for line in str(error).splitlines() if line.strip()) or type(error).__name__
-            raise FmuFileError(f"{path}: its modelDescription.xml cannot be read: {text}") from None
+            raise FmuFileError(f"{path}: its modelDescription.xml cannot be read: {_description_problem(error)}") \
+                from None
         declared = md.coSimulation if interface == CO_SIMULATION else md.modelExchange
         if declared is None:
             element = "CoSimulation" if interface == CO_SIMULATION else "ModelExchange"
@@ -143,9 +158,20 @@ class ModelInfo:
 
 
 # ------------------------------------------------------------ FMUs extracted once per process
-EXTRACTION_PREFIX = "afc-extracted-"  # afc-extracted-<pid>-<model>-...: its process removes it at exit
 _EXTRACTIONS: dict = {}  # FMU path -> (ModelInfo, extracted folder, (mtime, size)) of this process
-_RELEASE_AT_EXIT: list = []  # one atexit registration per process
+
+
+def extract_fmu(path, label: str) -> Path:
+    """The FMU at ``path`` unpacked (checked and bounded: harness/unpack.py) into a new folder of
+    :func:`harness.unpack.unpack_folder`, which the caller removes with :func:`harness.unpack.remove_folder`;
+    on failure nothing is left."""
+    folder = unpack.unpack_folder(label)
+    try:
+        unpack.extract_archive(path, folder)
+    except BaseException:
+        unpack.remove_folder(folder)
+        raise
+    return folder
 
 
 def extracted_fmu(path) -> tuple:
@@ -153,50 +179,55 @@ def extracted_fmu(path) -> tuple:
 
     For callers that run the same FMUs many times (tune's trials, the plain fmpy host): the folder
     is shared, never written after extraction, extracted again when the file changes (mtime or
-    size), and removed when the process ends (:func:`release_extractions`).  The first call of a
-    process also removes the extractions that killed processes of this host left behind.
+    size), and removed when the process ends (:func:`release_extractions`, and harness/unpack.py's
+    exit handler); the folders killed processes of this host left behind are removed by the first
+    unpacking of a process.
     """
     path = Path(path)
-    if not _RELEASE_AT_EXIT:
-        _RELEASE_AT_EXIT.append(atexit.register(release_extractions))
-        _remove_dead_extractions()
     stat = path.stat()
     stamp = (stat.st_mtime_ns, stat.st_size)
     known = _EXTRACTIONS.get(path)
     if known is None or known[2] != stamp:
         if known is not None:  # rebuilt meanwhile: extract the new one
-            shutil.rmtree(_EXTRACTIONS.pop(path)[1], ignore_errors=True)
-        folder = tempfile.mkdtemp(prefix=f"{EXTRACTION_PREFIX}{os.getpid()}-{path.stem}-")
-        extract(str(path), folder)
-        _EXTRACTIONS[path] = (ModelInfo.read(path), folder, stamp)
+            unpack.remove_folder(_EXTRACTIONS.pop(path)[1])
+        info = ModelInfo.read(path)
+        folder = extract_fmu(path, f"shared-{_label(path.stem)}")
+        try:
+            check_runs_from(info, folder)
+        except unpack.UnsafeFolder:
+            unpack.remove_folder(folder)
+            raise
+        _EXTRACTIONS[path] = (info, str(folder), stamp)
     info, folder, _ = _EXTRACTIONS[path]
     return info, folder
 
 
 def release_extractions() -> None:
-    """Remove this process's extracted FMUs (:func:`extracted_fmu`)."""
+    """Remove this process's extracted FMUs (:func:`extracted_fmu`) and every other folder it unpacked
+    into and has not removed (a worker stopped by SIGTERM calls this before it exits)."""
     while _EXTRACTIONS:
         _, (_, folder, _) = _EXTRACTIONS.popitem()
-        shutil.rmtree(folder, ignore_errors=True)
+        unpack.remove_folder(folder)
+    unpack.remove_owned()
 
 
-def process_alive(pid) -> bool:
-    """Whether process ``pid`` of this host is running (one that cannot be asked counts as running)."""
-    try:
-        os.kill(int(pid), 0)
-    except ProcessLookupError:
-        return False
-    except (PermissionError, TypeError, ValueError, OverflowError):
-        return True
-    return True
+def _label(name: str) -> str:
+    """A folder-name part from an instance name (the scenario allows letters, digits and '_'; other callers
+    may pass anything)."""
+    return re.sub(r"[^A-Za-z0-9_]", "_", name)[:40] or "instance"
 
 
-def _remove_dead_extractions() -> None:
-    """The extracted FMUs that killed processes of this host left in the temporary folder."""
-    for folder in Path(tempfile.gettempdir()).glob(f"{EXTRACTION_PREFIX}*"):
-        pid = folder.name[len(EXTRACTION_PREFIX):].split("-", 1)[0]
-        if pid.isdigit() and int(pid) != os.getpid() and not process_alive(int(pid)):
-            shutil.rmtree(folder, ignore_errors=True)
+PYTHONFMU = "PythonFMU"  # how pythonfmu names itself in modelDescription.xml's generationTool
+
+
+def check_runs_from(info: ModelInfo, folder) -> None:
+    """Refuse to load an FMU pythonfmu built from a folder whose resource URI needs percent-escapes: its C++
+    wrapper decodes only %20, finds no Python class and crashes the process (harness/unpack.py)."""
+    if info.generation_tool.startswith(PYTHONFMU) and not unpack.uri_safe(folder):
+        raise unpack.UnsafeFolder(
+            f"{info.path}: an FMU built by pythonfmu cannot run from {folder} (pythonfmu decodes no %-escape of "
+            f"its resource URI but %20 and crashes its host); set {unpack.UNPACK_DIR_VARIABLE} to a folder whose "
+            "path holds ASCII letters, digits, '-', '_', '.', '~' and spaces only (docs/using_fmus.md)")
 
 
 @dataclass
@@ -230,17 +261,17 @@ class Component:
         same FMUs thousands of times extracts them once); it is neither written nor removed here.
         """
         self._owns_dir = extracted is None
-        self.unzip_dir = tempfile.mkdtemp(prefix=f"afc_{self.name}_") if extracted is None else str(extracted)
+        self.unzip_dir = str(extract_fmu(self.info.path, f"run-{_label(self.name)}")) if extracted is None \
+            else str(extracted)
         try:
-            if self._owns_dir:
-                extract(str(self.info.path), self.unzip_dir)
+            check_runs_from(self.info, self.unzip_dir)
             if self.fmi3:
                 self._instantiate3(logging_on)
             else:
                 self._instantiate2(logging_on)
         except BaseException:
             if self._owns_dir:
-                shutil.rmtree(self.unzip_dir, ignore_errors=True)
+                unpack.remove_folder(self.unzip_dir)
             raise
         return self
 
@@ -335,7 +366,7 @@ class Component:
             self.slave.freeInstance()
         finally:
             if getattr(self, "_owns_dir", True):
-                shutil.rmtree(self.unzip_dir, ignore_errors=True)
+                unpack.remove_folder(self.unzip_dir)
 
     # -------------------------------------------------------------- per step
     def real_buffer(self, names) -> tuple:
@@ -514,5 +545,5 @@ class ModelExchangeComponent(Component):
 
 
 __all__ = ["BoundArrayCall", "Component", "ContinuousBlock", "FmiError", "FmuFileError", "ModelExchangeComponent",
-           "ModelInfo", "check_fmu_file", "extracted_fmu", "process_alive", "release_extractions", "CO_SIMULATION",
-           "MODEL_EXCHANGE"]
+           "ModelInfo", "check_fmu_file", "check_runs_from", "extract_fmu", "extracted_fmu", "process_alive",
+           "release_extractions", "CO_SIMULATION", "MODEL_EXCHANGE"]

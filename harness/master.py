@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import compiled_loop, master_loop, progress as progress_display
+from . import atomic_files, compiled_loop, master_loop, progress as progress_display
 from .fmi import BoundArrayCall, Component, FmiError, ModelInfo
 from .loop_interface import FAILED_FUNCTIONS, LoopOutcome
 from .scenario import Scenario, ScenarioError
@@ -91,15 +91,16 @@ class RunResult:
         return 1e6 * self.loop_cpu_s / max(self.rows - 1, 1)
 
     def write_csv(self, path, output_interval: float | None = None) -> Path:
-        """FMI cross-check style: time first, quoted ``instance.variable`` header."""
+        """FMI cross-check style: time first, quoted ``instance.variable`` header; written whole or not at all
+        (harness/atomic_files.py)."""
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         every = 1
         if output_interval:
             every = max(1, round(output_interval / self.scenario.step))
         table = np.column_stack([self.time, self.values])[::every]
         header = ",".join(f'"{name}"' for name in ["time", *self.columns])
-        np.savetxt(path, table, delimiter=",", header=header, comments="", fmt="%.17g")
+        with atomic_files.replacing(path, "w", newline="") as stream:
+            np.savetxt(stream, table, delimiter=",", header=header, comments="", fmt="%.17g")
         return path
 
 

@@ -9,7 +9,10 @@ The time left comes from the work done, not from the items finished: a :class:`W
 item's weight (a co-simulation's communication steps) and the fraction of it done, in memory the pool's
 workers share; a worker writes its item's fraction through :func:`step_reporter` about 200 times a run
 (the master's progress callback, between blocks of steps, off the per-step path), and
-:func:`time_left_s` turns weights, fractions and the elapsed time into seconds left.
+:func:`time_left_s` turns weights, fractions and the elapsed time into seconds left.  The rate is the
+work's own: it is measured from the moment the display first sees work done (the work done then and
+the time), so the start (spawning, importing, building and extracting the FMUs, instantiating) does not
+count as time the work took.
 """
 from __future__ import annotations
 
@@ -62,13 +65,13 @@ def command_ended() -> None:
 
 
 # ------------------------------------------------------------------ the estimate
-def time_left_s(weights, fractions, elapsed_s: float, workers: int) -> float | None:
-    """Seconds left of items of ``weights`` of which ``fractions`` (0 .. 1 each) are done after
-    ``elapsed_s`` on ``workers`` processes; None before any work is done.
+def time_left_s(weights, fractions, elapsed_s: float, workers: int, done_before: float = 0.0) -> float | None:
+    """Seconds left of items of ``weights`` of which ``fractions`` (0 .. 1 each) are done, ``done_before`` of
+    that work ``elapsed_s`` ago, on ``workers`` processes; None before any work is done in that time.
 
-    Every busy worker is taken to have worked at the same rate so far (the work done over elapsed
-    time x busy workers); the work left is then dealt out as the pool deals it: the items under way
-    (0 < fraction < 1) first, then the waiting ones in their order, each to the worker that is free
+    Every busy worker is taken to have worked at the same rate (the work done in ``elapsed_s`` over
+    ``elapsed_s`` x busy workers); the work left is then dealt out as the pool deals it: the items under
+    way (0 < fraction < 1) first, then the waiting ones in their order, each to the worker that is free
     first.  The time left is when the last worker finishes, so a long item alone at the end counts
     at one worker's rate, not at the whole pool's.
     """
@@ -78,7 +81,7 @@ def time_left_s(weights, fractions, elapsed_s: float, workers: int) -> float | N
         raise ValueError(f"{len(weights)} weights but {len(fractions)} fractions: one of each per item")
     if workers < 1:
         raise ValueError(f"workers = {workers!r}: a whole number >= 1")
-    done = sum(w * f for w, f in zip(weights, fractions))
+    done = sum(w * f for w, f in zip(weights, fractions)) - done_before
     if done <= 0.0 or elapsed_s <= 0.0:
         return None
     busy = min(workers, len(weights))
@@ -113,8 +116,8 @@ class WorkBoard:
     def finish(self, index: int) -> None:
         self.fractions[index] = 1.0
 
-    def time_left_s(self, elapsed_s: float, workers: int) -> float | None:
-        return time_left_s(self.weights, list(self.fractions), elapsed_s, workers)
+    def time_left_s(self, elapsed_s: float, workers: int, done_before: float = 0.0) -> float | None:
+        return time_left_s(self.weights, list(self.fractions), elapsed_s, workers, done_before)
 
 
 _FRACTIONS = None  # this process's view of a board's fractions (attach)
@@ -171,6 +174,7 @@ class Progress:
         began = _COMMAND_STARTED
         self.first_line_from = began if began is not None and began <= self.started else self.started
         self.finished_since_line = False
+        self._rate_from = None  # (perf_counter time, work done) when work was first seen done: the rate's origin
         terminal = self.stream.isatty() if bar is None else bar
         self.mode = "off" if not enabled else "bar" if terminal else "lines"
         self._lock = threading.RLock()
@@ -196,6 +200,7 @@ class Progress:
             self.done += count
             self.label = label or self.label
             self.finished_since_line = True
+            self._observe()
             if self._bar is not None:
                 if self.board is not None and self.board.unit:
                     self._redraw()
@@ -228,15 +233,30 @@ class Progress:
             elif self.mode == "lines" and self.printed:
                 self._line(self._status(final=True))
 
+    def _work_done(self) -> float:
+        return self.board.done() if self.board is not None and self.board.unit else float(self.done)
+
+    def _observe(self) -> None:
+        """Take the rate's origin the first time work is seen done (an update, or a clock tick)."""
+        if self._rate_from is None:
+            done = self._work_done()
+            if done > 0:
+                self._rate_from = (clock.perf_counter(), done)
+
     def time_left_s(self) -> float | None:
-        """The estimate the lines and the bar show (time_left_s)."""
-        elapsed = clock.perf_counter() - self.started
-        if self.board is not None:
+        """The estimate the lines and the bar show (time_left_s), from the rate since work was first seen
+        done: None until then and until more is done."""
+        self._observe()
+        if self._rate_from is None:
+            return None
+        began, done_before = self._rate_from
+        elapsed = clock.perf_counter() - began
+        if self.board is not None and self.board.unit:
             if self.board.done() < ESTIMATE_FROM_SHARE * self.board.total:
                 return None
-            return self.board.time_left_s(elapsed, self.workers)
+            return self.board.time_left_s(elapsed, self.workers, done_before)
         return time_left_s([1.0] * self.total, [1.0] * min(self.done, self.total) +
-                           [0.0] * max(0, self.total - self.done), elapsed, self.workers)
+                           [0.0] * max(0, self.total - self.done), elapsed, self.workers, done_before)
 
     def _status(self, final: bool = False) -> str:
         elapsed = clock.perf_counter() - self.started
@@ -253,6 +273,7 @@ class Progress:
         while not self._stopped.wait(tick):
             try:
                 with self._lock:
+                    self._observe()
                     if self._bar is not None:
                         self._redraw()
                         continue

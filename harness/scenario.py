@@ -13,6 +13,10 @@ type or out of range: one line naming the file, the table and the key), and the 
 keys in docs/master.md is generated from it (:func:`keys_markdown`, ``python build_fmu.py --docs``).
 Names that only the FMUs know (parameters, variables) are checked against their model
 descriptions by harness/master.py.  harness/scenario_toml.py writes a scenario back as such a file.
+
+A ``[hardware]`` table (or ``--hardware FILE`` of ``python -m harness run``) inserts a sensor
+between the plant and the rest of the loop and an actuator between the controller and the plant,
+and rewires the connections (:func:`with_hardware`; docs/master.md, "Hardware in the loop").
 """
 from __future__ import annotations
 
@@ -83,6 +87,7 @@ class Scenario:
     bounds: dict = field(default_factory=dict)  # "instance.variable" -> its own divergence bound
     path: Path | None = None
     notes: list = field(default_factory=list)  # what configure() changed that the user did not ask for
+    hardware: dict = field(default_factory=dict)  # the [hardware] table inserted (with_hardware), as given
 
     def bound(self, dotted: str) -> float:
         """The divergence bound of one signal: its own, else the scenario's."""
@@ -165,8 +170,10 @@ def check_record_memory(steps: int, recorded: int, start: float, step: float, me
 
 
 def configure(name_or_path, controller: str | None = None, step: float | None = None,
-              stop: float | None = None, overrides=(), fit_stop: str = "error") -> Scenario:
+              stop: float | None = None, overrides=(), fit_stop: str = "error", hardware=None) -> Scenario:
     """A scenario with the controller variant, step, stop and ``instance.parameter`` values set.
+
+    ``hardware``: a hardware file (:func:`load_hardware`) whose sensor and actuator are inserted first.
 
     The run covers a whole number of steps.  A stop that was given (``stop`` or an
     override) and is not a whole number of steps from the start is an error naming
@@ -178,6 +185,8 @@ def configure(name_or_path, controller: str | None = None, step: float | None = 
     if fit_stop not in ("error", "move"):
         raise ValueError(f"fit_stop={fit_stop!r}; valid: error, move")
     scenario = load(name_or_path)
+    if hardware is not None:
+        scenario = with_hardware(scenario, load_hardware(hardware), str(hardware))
     if controller is not None:
         scenario = scenario.with_controller(controller)
     if step is not None:
@@ -230,6 +239,9 @@ def load(name_or_path) -> Scenario:
             data = tomllib.load(stream)
         except tomllib.TOMLDecodeError as error:
             raise ScenarioError(f"{path} is not valid TOML: {error}") from None
+        except UnicodeDecodeError as error:  # TOML is UTF-8 text: a binary file or another encoding
+            raise ScenarioError(f"{path} is not a TOML file: byte {error.start} is not UTF-8 text "
+                                f"({error.reason})") from None
     return parse(data, path)
 
 
@@ -239,10 +251,18 @@ def load(name_or_path) -> Scenario:
 
 ANY_INSTANCE, ANY_PARAMETER, ANY_SIGNAL = "INSTANCE", "PARAMETER", "INSTANCE.VARIABLE"  # names the user chooses
 CHOSEN_NAMES = (ANY_INSTANCE, ANY_PARAMETER, ANY_SIGNAL)
+#: an instance name: it becomes part of file and folder names, of the FMU's resource URI and of SSP names, so
+#: ASCII letters, digits and '_' only, not starting with a digit (as an identifier of C, Modelica or SSP)
+INSTANCE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+INSTANCE_NAME_RULE = "ASCII letters, digits and '_', not starting with a digit"
 
 
 def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_integer(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _is_dotted(value) -> bool:
@@ -267,6 +287,10 @@ DOTTED_LIST = Kind('an array of strings "INSTANCE.VARIABLE"', lambda v: isinstan
 PARAMETER_VALUE = Kind("a finite number (true or false for a Boolean parameter)",
                        lambda v: isinstance(v, bool) or (_is_number(v) and math.isfinite(v)))
 TABLE = Kind("a table", lambda v: isinstance(v, dict), table=True)
+NON_NEGATIVE = Kind("a finite number >= 0", lambda v: _is_number(v) and math.isfinite(v) and v >= 0)
+LIMIT = Kind("a number >= 0 (0 or inf: no limit)", lambda v: _is_number(v) and not math.isnan(v) and v >= 0)
+SEED = Kind("an integer in 0 .. 2147483647", lambda v: _is_integer(v) and 0 <= v <= 2147483647)
+DELAY = Kind("an integer in 0 .. 16", lambda v: _is_integer(v) and 0 <= v <= 16)
 TABLES = Kind("an array of tables", lambda v: isinstance(v, list), element=TABLE)
 
 REQUIRED = object()  # the default of a key that must be given
@@ -306,7 +330,8 @@ SCHEMA = (
         "a run stops as diverged when a connected or recorded signal without its own [bounds] entry "
         "reaches this magnitude or is not finite"),
     Key("", "components", TABLE, REQUIRED, "the FMU instances, one table each"),
-    Key("components", ANY_INSTANCE, TABLE, Described("one or more"), "one FMU instance; its name has no '.'"),
+    Key("components", ANY_INSTANCE, TABLE, Described("one or more"),
+        f"one FMU instance; its name: {INSTANCE_NAME_RULE}"),
     Key("components.INSTANCE", "fmu", TEXT, REQUIRED,
         "a model identifier built by build_fmu.py (AdaptiveFuzzyController, InvertedPendulum, Manipulator, "
         "DcMotorArm, TrackingReference) or the path of an .fmu file, relative to the scenario file"),
@@ -328,6 +353,26 @@ SCHEMA = (
                             ("d3e", "third derivative of e (plants of order 4)"))),
     Key("", "record", TABLE, {}, "what is recorded at every communication step"),
     Key("record", "variables", DOTTED_LIST, [], "the outputs recorded (every signal of [signals] among them)"),
+    Key("", "hardware", TABLE, {}, "a `Sensor` between the plant and the rest of the loop and an `Actuator` between "
+        "the controller and the plant, the connections rewired (docs/master.md, Hardware in the loop); the "
+        "scores then read the true error"),
+    Key("hardware", "plant", TEXT, "plant", "the instance the sensor measures (its outputs y, dy, d2y, d3y that are "
+        "connected) and the actuator drives (its connected input)"),
+    Key("hardware", "sample_period", NON_NEGATIVE, 0.0,
+        "the clock of the sensor and the actuator, Ts (s); 0: none, they follow every communication point"),
+    Key("hardware", "seed", SEED, 0, "the noise's global seed (the sensor's local seed is 1)"),
+    *(Key("hardware", f"noise_{channel}", NON_NEGATIVE, 0.0,
+          f"standard deviation of the noise on {channel}, in its unit; needs sample_period > 0")
+      for channel in ("y", "dy", "d2y", "d3y")),
+    *(Key("hardware", f"quantum_{channel}", NON_NEGATIVE, 0.0, f"quantisation step of {channel}, in its unit; 0: none")
+      for channel in ("y", "dy", "d2y", "d3y")),
+    Key("hardware", "delay_samples", DELAY, 0, "the sensor's delay in samples; needs sample_period > 0"),
+    Key("hardware", "filter_time_constant", NON_NEGATIVE, 0.0,
+        "the sensor's first-order filter, time constant (s); 0: none; needs sample_period > 0"),
+    Key("hardware", "u_max", LIMIT, 0.0, "the actuator's saturation, -u_max <= u <= u_max, in the unit of u"),
+    Key("hardware", "rate_limit", LIMIT, 0.0, "the actuator's largest rate of u, in the unit of u per second"),
+    Key("hardware", "rate_time_constant", POSITIVE, 1e-3, "the rate limiter's time constant Td (s)"),
+    Key("hardware", "actuator_delay_samples", DELAY, 0, "the actuator's delay in samples; needs sample_period > 0"),
 )
 SIGNAL_ROLES = tuple(key.name for key in SCHEMA if key.table == "signals")
 
@@ -356,8 +401,8 @@ def _check_table(data: dict, table: str, dotted: str, shown: str, where: str):
             place = "" if shown else " at the top level"
             raise ScenarioError(f"{prefix}unknown key {name!r}{place}{did_you_mean(name, named)}; "
                                 f"valid: {', '.join(named)}")
-        if key.name == ANY_INSTANCE and "." in name:
-            raise ScenarioError(f"{prefix}instance name {name!r} must not contain '.'")
+        if key.name == ANY_INSTANCE and not INSTANCE_NAME.fullmatch(name):
+            raise ScenarioError(f"{prefix}instance name {name!r} is not allowed: use {INSTANCE_NAME_RULE}")
         if key.name == ANY_SIGNAL and not _is_dotted(name):
             raise ScenarioError(f"{prefix}{name!r} is not a signal name; write \"INSTANCE.VARIABLE\" = bound")
         if not key.kind.accepts(value):
@@ -415,11 +460,141 @@ def parse(data: dict, path: Path | None = None) -> Scenario:
         bounds={name: float(value) for name, value in _value(data, "", "bounds").items()},
         path=path,
     )
+    if "hardware" in data:
+        scenario = with_hardware(scenario, data["hardware"], where)
     try:
         _ = scenario.steps  # at least one step, and a record that fits in memory
     except ScenarioError as error:
         raise ScenarioError(f"{where}: [experiment] {error}") from None
     return scenario
+
+
+# ------------------------------------------------------------- hardware in the loop
+#: what [hardware] inserts: the FMUs (plants/sensor/, plants/actuator/), their instances' names, and the
+#: variables it connects (the sensor's channels: an input and its measured output each)
+SENSOR_FMU, ACTUATOR_FMU = "Sensor", "Actuator"
+SENSOR, ACTUATOR, TRUTH = "sensor", "actuator", "truth"
+SENSOR_CHANNELS = ("y", "dy", "d2y", "d3y")
+ACTUATOR_INPUT, ACTUATOR_OUTPUT = "u", "u_applied"
+ERROR_ROLES = ("e", "de", "d2e", "d3e")  # the roles the scores read from the true error after insertion
+SENSOR_LOCAL_SEED = 1
+
+
+def _measured(channel: str) -> str:
+    return f"{channel}_measured"
+
+
+def _limit(value) -> float:
+    """A limit of [hardware] as the FMU's parameter: inf (no limit) is the FMU's 0."""
+    return 0.0 if math.isinf(value) else float(value)
+
+
+def hardware_parameters(table: dict) -> tuple:
+    """(sensor parameters, actuator parameters) of a checked [hardware] table (every key, defaults filled)."""
+    value = {key.name: table.get(key.name, key.default) for key in SCHEMA if key.table == "hardware"}
+    sensor = {"sample_period": float(value["sample_period"]), "delay_samples": value["delay_samples"],
+              "filter_time_constant": float(value["filter_time_constant"]), "seed": value["seed"],
+              "local_seed": SENSOR_LOCAL_SEED,
+              **{f"{kind}_{c}": float(value[f"{kind}_{c}"]) for kind in ("noise", "quantum") for c in SENSOR_CHANNELS}}
+    actuator = {"sample_period": float(value["sample_period"]), "delay_samples": value["actuator_delay_samples"],
+                "u_max": _limit(value["u_max"]), "rate_limit": _limit(value["rate_limit"]),
+                "rate_time_constant": float(value["rate_time_constant"])}
+    return sensor, actuator
+
+
+def with_hardware(scenario: Scenario, table: dict, where: str = "scenario") -> Scenario:
+    """A copy of ``scenario`` with a sensor and an actuator inserted (the [hardware] table ``table``).
+
+    * ``sensor`` (FMU Sensor): every connection that leaves the plant's y, dy, d2y or d3y leaves the
+      sensor's measured channel instead, and the plant's channel feeds the sensor;
+    * ``actuator`` (FMU Actuator): the connection into the plant's input comes from the actuator's
+      ``u_applied``, and its source feeds the actuator's ``u``;
+    * ``truth``: a copy of the instance the scores read the tracking error from (the reference), fed as
+      it was before (the true plant outputs): the scores read the true error (signals e, de, ...), not
+      the measured one; the record adds it and the new instances' outputs.
+
+    Every mistake is one ScenarioError naming ``where`` and the table.
+    """
+    prefix = f"{where}: [hardware]"
+    if scenario.hardware:
+        raise ScenarioError(f"{prefix} the scenario {scenario.name!r} already has hardware inserted; give one "
+                            "[hardware] table (the scenario's or --hardware's), not both")
+    _check_table(table, "hardware", "hardware", "[hardware]", where)
+    if not table.get("sample_period", 0.0):
+        clocked = [name for name in (*(f"noise_{c}" for c in SENSOR_CHANNELS), "delay_samples", "filter_time_constant",
+                                     "actuator_delay_samples") if table.get(name, 0)]
+        if clocked:
+            raise ScenarioError(f"{prefix} {clocked[0]} = {_shown(table[clocked[0]])} needs the clock of the sensor and "
+                                "the actuator (noise is drawn, delays counted and the filter run once per sample); "
+                                f"give sample_period > 0, or {clocked[0]} = 0")
+    result = copy.deepcopy(scenario)
+    plant = table.get("plant", "plant")
+    if plant not in result.components:
+        raise ScenarioError(f"{prefix} plant = {plant!r} is not a component{did_you_mean(plant, result.components)}; "
+                            f"valid: {', '.join(result.components)}")
+    taken = [name for name in (SENSOR, ACTUATOR, TRUTH) if name in result.components]
+    if taken:
+        raise ScenarioError(f"{prefix} inserts the instances {SENSOR}, {ACTUATOR} and {TRUTH}; the scenario already "
+                            f"has {', '.join(repr(name) for name in taken)}: rename it")
+    measured = [c for c in result.connections if c.source_instance == plant and c.source_variable in SENSOR_CHANNELS]
+    driven = [c for c in result.connections if c.target_instance == plant]
+    if not measured:
+        raise ScenarioError(f"{prefix} no connection leaves {', '.join(f'{plant}.{c}' for c in SENSOR_CHANNELS)}: "
+                            "the sensor would measure nothing")
+    if len(driven) != 1:
+        raise ScenarioError(f"{prefix} the actuator drives one input of {plant}; {len(driven)} connections go into "
+                            f"it ({', '.join(c.target for c in driven) or 'none'})")
+    roles = {role: result.signals[role] for role in ERROR_ROLES if result.signals.get(role)}
+    observers = {dotted.split(".", 1)[0] for dotted in roles.values()}
+    if len(observers) != 1 or next(iter(observers)) not in result.components:
+        raise ScenarioError(f"{prefix} the signals {', '.join(roles)} must come from one component (the reference "
+                            f"the true error is copied from); they come from {', '.join(sorted(observers))}")
+    observer = next(iter(observers))
+    sensor, actuator = hardware_parameters(table)
+    result.components[SENSOR] = ComponentSpec(SENSOR, SENSOR_FMU, sensor)
+    result.components[ACTUATOR] = ComponentSpec(ACTUATOR, ACTUATOR_FMU, actuator)
+    result.components[TRUTH] = ComponentSpec(TRUTH, result.components[observer].fmu,
+                                             dict(result.components[observer].parameters))
+    truth = [Connection(c.source, f"{TRUTH}.{c.target_variable}") for c in result.connections
+             if c.target_instance == observer]
+    connections = []
+    for connection in result.connections:
+        if connection in measured:
+            connection = Connection(f"{SENSOR}.{_measured(connection.source_variable)}", connection.target)
+        elif connection in driven:
+            connections.append(Connection(connection.source, f"{ACTUATOR}.{ACTUATOR_INPUT}"))
+            connection = Connection(f"{ACTUATOR}.{ACTUATOR_OUTPUT}", connection.target)
+        connections.append(connection)
+    channels = list(dict.fromkeys(c.source_variable for c in measured))
+    connections += [Connection(f"{plant}.{channel}", f"{SENSOR}.{channel}") for channel in channels] + truth
+    result.connections = connections
+    for role, dotted in roles.items():
+        result.signals[role] = f"{TRUTH}.{dotted.split('.', 1)[1]}"
+    added = ([f"{SENSOR}.{_measured(channel)}" for channel in channels] + [f"{ACTUATOR}.{ACTUATOR_OUTPUT}"]
+             + list(dict.fromkeys(result.signals[role] for role in roles)))
+    result.record = list(dict.fromkeys(result.record + added))
+    result.hardware = dict(table)
+    return result
+
+
+def load_hardware(path) -> dict:
+    """The [hardware] table of a hardware file (a TOML file holding that one table), checked against SCHEMA."""
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(f"no such file: {path}")
+    with open(path, "rb") as stream:
+        try:
+            data = tomllib.load(stream)
+        except tomllib.TOMLDecodeError as error:
+            raise ScenarioError(f"{path} is not valid TOML: {error}") from None
+    others = [name for name in data if name != "hardware"]
+    if others or "hardware" not in data:
+        raise ScenarioError(f"{path}: a hardware file holds one [hardware] table"
+                            + (f"; unknown key {others[0]!r}{did_you_mean(others[0], ['hardware'])}" if others else ""))
+    if not isinstance(data["hardware"], dict):
+        raise ScenarioError(f"{path}: hardware = {_shown(data['hardware'])} is not a table")
+    _check_table(data["hardware"], "hardware", "hardware", "[hardware]", str(path))
+    return data["hardware"]
 
 
 def _default_text(default) -> str:
@@ -433,6 +608,8 @@ def _default_text(default) -> str:
         return default.text
     if isinstance(default, float):
         return f"`{default:g}`"
+    if _is_integer(default):
+        return f"`{default}`"
     return f'`"{default}"`'
 
 

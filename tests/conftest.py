@@ -4,6 +4,7 @@ At the end of a session the summary lists what the session left in the temporary
 directory (pytest's own pytest-of-USER folder aside): a run should leave nothing.
 On a machine where other processes share the folder, their new entries appear too.
 """
+import importlib.util
 import os
 import sys
 import tempfile
@@ -27,6 +28,11 @@ SLOW = {
     "test_afc_math.py": ("test_projection_keeps_theta_below_bound_under_adversarial_tau",),
     "test_afc_math_c.py": ("test_p_solves_the_lyapunov_equation_as_scipy_does",
         "test_the_native_controller_fmu_is_the_python_one_at_any_order",),
+    "test_archives.py": ("test_fmpys_ssp_path_leaves_nothing_when_a_run_fails",
+        "test_run_ssp_refuses_a_bomb_fmu_inside_the_package_before_fmpy_unpacks_it",),
+    "test_atomic_outputs.py": ("test_export_ssp_out_on_a_full_disk_keeps_the_previous_package",
+        "test_run_out_on_a_full_disk_keeps_the_previous_csv_and_names_it",
+        "test_the_reports_on_a_full_disk_keep_the_previous_ones",),
     "test_architecture.py": ("test_the_graph_sees_the_imports_it_must_see",
         "test_the_project_keeps_its_import_architecture",),
     "test_bench.py": ("test_bench_json_reports_every_figure_and_times_the_right_runs",
@@ -52,6 +58,12 @@ SLOW = {
         "test_every_bad_argument_of_every_subcommand_is_one_line_and_exit_2",
         "test_every_scenario_key_misspelt_and_every_value_of_the_wrong_type_is_one_line_and_exit_2",
         "test_sweep_writes_docs_only_with_apply_and_says_what_it_changed",),
+    "test_cluster.py": ("test_every_worker_lost_the_files_go_again_to_the_next_and_none_at_all_is_said",
+        "test_a_short_tune_on_the_cluster_finishes_as_the_local_pool_does",
+        "test_a_sweep_on_the_cluster_gives_the_local_pools_rows_and_ships_the_fmus_once",
+        "test_a_worker_killed_mid_sweep_loses_nothing_and_counts_nothing_twice",
+        "test_the_scheduler_gone_mid_sweep_is_one_line_and_the_sweep_resumes",
+        "test_the_recipe_of_a_study_of_short_runs_survives_a_killed_worker_and_an_interrupt",),
     "test_compat.py": ("test_a_reference_that_fmpy_does_not_reproduce_is_marked_failed",
         "test_every_fmu_of_both_editions_and_every_declared_interface_is_published",
         "test_every_reference_comes_back_from_fmpy_simulate_on_its_inputs",
@@ -82,6 +94,10 @@ SLOW = {
         "test_our_default_feedthrough_master_agrees_with_both_engines_at_a_small_step", "test_scores_side_by_side",
         "test_the_step_is_in_every_engines_annotation",),
     "test_exit_safety.py": EVERY_TEST,
+    "test_executors.py": ("test_a_local_pool_does_every_task_once_under_its_key",
+        "test_a_task_that_kills_its_worker_is_lost_alone_and_every_other_is_done_once",
+        "test_the_task_of_a_lost_worker_runs_again", "test_worker_state_is_made_once_per_worker_and_kept_across_tasks",
+        "test_a_batch_whose_worker_dies_is_split_and_only_its_culprit_is_lost",),
     "test_extras.py": ("test_a_command_that_needs_a_missing_extra_says_which_in_one_line",
         "test_the_host_matrix_skips_a_host_whose_extra_is_missing_and_says_so",
         "test_the_main_job_runs_on_the_core_install_alone",),
@@ -91,6 +107,20 @@ SLOW = {
         "test_huge_finite_inputs_give_finite_outputs_or_an_error_never_nan",
         "test_non_finite_input_at_any_moment_is_an_error_never_a_non_finite_output",),
     "test_fmucheck.py": EVERY_TEST,
+    "test_hardware_fmus.py": ("test_both_editions_draw_the_pure_functions_noise_bit_for_bit",
+        "test_the_samples_depend_neither_on_the_hosts_step_nor_on_the_host",
+        "test_a_sample_inside_a_step_comes_from_the_input_held_over_it_and_the_delay_line_starts_full",
+        "test_the_actuator_saturates_delays_and_slews_as_the_exact_solution",
+        "test_without_initial_values_both_start_from_the_inputs_of_the_first_step",
+        "test_a_host_that_reads_before_it_sets_gets_one_warning_naming_the_time",
+        "test_model_exchange_takes_the_samples_at_announced_time_events",
+        "test_fmpy_in_model_exchange_gets_the_co_simulation_samples",
+        "test_the_actuator_in_model_exchange_integrates_the_slew_law",
+        "test_a_clockless_quantiser_is_refused_in_model_exchange_and_kept_in_co_simulation",),
+    "test_hardware_scenario.py": ("test_neutral_hardware_gives_todays_records_bit_for_bit",
+        "test_a_jacobi_host_gets_the_hardwares_warning_and_a_feedthrough_master_none",),
+    "test_hardware_study.py": ("test_the_committed_csv_is_what_the_command_computes",
+        "test_a_short_run_of_the_command_writes_its_csv_and_section",),
     "test_host_robustness.py": ("test_chatter_in_jacobi_warns_once", "test_no_warning_in_our_masters_converged_runs",
         "test_pinned_e0_de0_set_the_modified_error", "test_pinned_initial_error_is_used_without_warning",
         "test_plain_gauss_seidel_in_every_order_gets_the_converged_result",
@@ -150,6 +180,7 @@ SLOW = {
         "test_two_builds_at_once_leave_one_whole_fmu",),
     "test_omsimulator.py": ("test_its_c_api_takes_the_step_from_the_package_and_matches_our_master",
         "test_its_matrix_rows_are_within_1_percent_without_warnings", "test_its_python_api_reads_no_step_annotation",
+        "test_nothing_is_printed_after_a_process_that_ran_it_ends",
         "test_its_strongly_coupled_mode_is_first_order_in_its_maximum_step",),
     "test_plants.py": ("test_bad_parameter_fails_with_a_message_naming_it_and_its_range",
         "test_friction_opposes_motion_and_payload_follows_mr0_plus_mr1_sin_t",
@@ -183,10 +214,17 @@ SLOW = {
         "test_unreachable_scheduler_is_a_clear_error",),
     "test_tables.py": ("test_tables_in_model_exchange_decide_the_claims_on_tolerance_ladders",
         "test_tables_writes_tables_report_and_figures",),
-    "test_temp_cleanup.py": ("test_an_ecos_run_leaves_nothing",
+    "test_temp_cleanup.py": ("test_a_run_killed_with_sigkill_leaves_folders_the_next_run_removes",
+        "test_an_ecos_run_leaves_nothing", "test_tables_stopped_while_its_workers_run_leaves_nothing",
         "test_fmus_extracted_once_per_process_are_shared_renewed_and_removed",
         "test_the_driven_helper_removes_its_extraction",),
+    "test_termination.py": ("test_sigkill_of_the_command_leaves_no_pool_worker_behind",),
     "test_tune.py": ("test_a_best_that_moves_at_half_the_step_is_pruned_not_reported",
+        "test_a_database_server_that_cannot_be_used_is_one_line_exit_2_before_any_trial",
+        "test_a_full_disk_mid_study_is_one_line_naming_the_database_and_keeps_the_trials",
+        "test_a_run_killed_mid_trial_is_resumed_by_another_through_its_heartbeat",
+        "test_another_seed_is_another_study_and_a_shared_study_says_whose_seed_it_samples",
+        "test_the_password_reaches_no_terminal_log_or_file",
         "test_a_constraint_keeps_a_candidate_that_misses_it_from_being_best",
         "test_a_killed_run_resumes_with_every_finished_trial_kept",
         "test_a_study_writes_a_scenario_that_run_and_regress_take_and_run_reproduces_its_score_exactly",
@@ -196,6 +234,7 @@ SLOW = {
         "test_the_report_says_plainly_when_no_trial_beat_the_start", "test_the_same_seed_gives_the_same_trials",
         "test_trials_of_dead_processes_are_failed_and_retried_those_of_live_ones_kept",
         "test_two_processes_drive_one_study_to_exactly_its_budget",),
+    "test_unsafe_paths.py": EVERY_TEST,
     "test_units.py": ("test_table_figures_label_every_panel_with_its_unit",),
     "test_work_precision.py": ("test_a_short_run_measures_every_point_and_draws_the_figure",),
 }
@@ -227,6 +266,46 @@ def fmu_paths():
     return build_fmu.ensure_built()
 
 
+#: set by .ci/run: a server the tests start (PostgreSQL, Dask) that cannot be had fails its tests instead of
+#: skipping them, so that CI runs them or says why not
+REQUIRE_SERVERS = os.environ.get("AFC_REQUIRE_SERVERS") == "1"
+
+
+def _unavailable(reason: str):
+    """Skip, or fail where the servers are required (AFC_REQUIRE_SERVERS=1)."""
+    if REQUIRE_SERVERS:
+        pytest.fail(f"{reason}; AFC_REQUIRE_SERVERS=1 (.ci/run) requires it", pytrace=False)
+    pytest.skip(reason)
+
+
+@pytest.fixture(scope="session")
+def postgres():
+    """A throwaway PostgreSQL server on 127.0.0.1 with a password, for the session (tests/cluster_helpers.py);
+    skipped where PostgreSQL or its driver is missing, unless AFC_REQUIRE_SERVERS=1 (.ci/run installs
+    Debian's package, the test extra psycopg, and requires them)."""
+    from tests.cluster_helpers import PostgresServer, postgres_bin
+
+    bin_dir = postgres_bin()
+    if bin_dir is None:
+        _unavailable("PostgreSQL is not installed (apt-get install postgresql; .ci/run installs it)")
+    if importlib.util.find_spec("psycopg") is None:
+        _unavailable("psycopg, the PostgreSQL driver of the postgres extra, is not installed")
+    with PostgresServer(bin_dir) as server:
+        yield server
+
+
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1, one thread each, started with the
+    commands docs/studies.md prints (tests/cluster_helpers.py) and stopped after the test."""
+    if importlib.util.find_spec("distributed") is None:
+        _unavailable("dask.distributed, of the cluster extra, is not installed")
+    from tests.cluster_helpers import DaskCluster
+
+    with DaskCluster(2, tmp_path / "dask") as cluster:
+        yield cluster
+
+
 @pytest.fixture(scope="session")
 def lag_plant_fmu(tmp_path_factory):
     """A user's plant FMU that the project does not ship (tests/data/first_order_lag_fmu.py), built once."""
@@ -252,20 +331,63 @@ _TEMP_BEFORE = set()
 
 def pytest_sessionstart(session):
     _TEMP_BEFORE.update(os.listdir(tempfile.gettempdir()))
-    if session.config.getoption("numprocesses", None) and not hasattr(session.config, "workerinput"):
-        _build_before_the_workers_start()
+    if hasattr(session.config, "workerinput"):  # a pytest-xdist worker: the controller said it all
+        return
+    if session.config.getoption("numprocesses", None):
+        _build_before_the_workers_start(_say(session.config))
+    else:
+        _announce_stale_fmus(_say(session.config))
 
 
-def _build_before_the_workers_start():
-    """Under pytest-xdist (-n), the controller builds what is stale once, before its workers start:
-    otherwise each worker would build the same FMUs at once (safe, as every build replaces its file whole,
-    but twice the work)."""
+def _say(config):
+    """One line on the terminal now, before the first test (pytest captures print)."""
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    return reporter.write_line if reporter is not None else (lambda text: print(text, file=sys.stderr, flush=True))
+
+
+def _stale() -> tuple:
+    """(stale pythonfmu FMUs, stale native models or None without zig's compiler)."""
     from harness.fmu_build import builder as build_fmu
     from harness.fmu_build import native as build_native
 
+    python = [fmu.model_identifier for fmu in build_fmu.FMUS if build_fmu.is_stale(fmu)]
+    native = build_native.stale_models() if build_native.compiler_available() else None
+    return python, native
+
+
+def _announce_stale_fmus(say):
+    """A serial session builds an FMU when a test first needs it: say which are stale, so the wait is explained."""
+    python, native = _stale()
+    if python:
+        say(f"FMUs to build (pythonfmu, seconds each) when a test first needs them: {', '.join(python)}")
+    if native:
+        say(f"native FMUs to build (FMI 2.0 and 3.0 for every target, minutes on a cold zig cache) when a test "
+            f"first needs them: {', '.join(model.model_identifier for model in native)}")
+
+
+def _build_before_the_workers_start(say):
+    """Under pytest-xdist (-n), the controller builds what is stale once, before its workers start:
+    otherwise each worker would build the same FMUs at once (safe, as every build replaces its file whole,
+    but twice the work).  It says what it builds, one line per FMU, before it builds it."""
+    import time as clock
+
+    from harness.fmu_build import builder as build_fmu
+    from harness.fmu_build import native as build_native
+
+    python, native = _stale()
+    began = clock.perf_counter()
+    if python:
+        say(f"building the pythonfmu FMUs before the tests: {', '.join(python)}")
     build_fmu.ensure_built()
-    if build_native.compiler_available():
-        build_native.ensure_built()
+    if native:
+        say(f"building {len(native)} native FMUs before the tests (a few minutes on a cold zig cache):")
+
+        def announce(model, targets):
+            say(f"  {model.model_identifier}: FMI 2.0 and 3.0 for {', '.join(targets)} ({2 * len(targets)} binaries)")
+
+        build_native.ensure_built(announce=announce)
+    if python or native:
+        say(f"FMUs built in {clock.perf_counter() - began:.0f} s")
 
 
 def pytest_sessionfinish(session):

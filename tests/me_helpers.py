@@ -38,6 +38,7 @@ class MeInstance:
         self.types = {v.name: v.type for v in self.md.modelVariables}
         self.nx = self.md.numberOfContinuousStates
         self.nz = self.md.numberOfEventIndicators
+        self.next_event_time = None  # the time event the FMU announced at its last event update
         self.messages = []
         identifier = self.md.modelExchange.modelIdentifier
         if version == 2:
@@ -71,8 +72,10 @@ class MeInstance:
         return self
 
     def update(self) -> tuple:
-        """newDiscreteStates / updateDiscreteStates: (needs another update, values of states changed)."""
+        """newDiscreteStates / updateDiscreteStates: (needs another update, values of states changed); the next
+        time event it announces is kept in ``next_event_time`` (None: none)."""
         result = self.fmu.newDiscreteStates() if self.version == 2 else self.fmu.updateDiscreteStates()
+        self.next_event_time = float(result[5]) if result[4] else None
         return bool(result[0]), bool(result[3])
 
     def exit(self) -> bool:

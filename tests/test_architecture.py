@@ -11,10 +11,10 @@ Rules (docs/architecture.md draws them):
   registers every subcommand), and no study imports a host runner;
 * the harness's top level holds the core only (studies in harness/studies/, host runners in
   harness/hosts/, the FMU builds in harness/fmu_build/, which import neither studies nor hosts);
-* a chain of modules (``CHAINS``: the tune study's sub-package, the host matrix's modules, the
-  native build's stages) reads
+* a chain of modules (``CHAINS``: the tune and regression studies' sub-packages, the host matrix's
+  modules, the native build's stages) reads
   from the bottom up: each module imports only the chain's modules before it, and a new module of
-  harness/studies/tune/ takes its place in the chain;
+  harness/studies/tune/ or harness/studies/regression/ takes its place in the chain;
 * the native build ``harness.fmu_build.native`` (and its stages, ``harness.fmu_build.native_stages``) never
   reaches the build command ``harness.fmu_build.builder`` (which may import the native build), and
   the masters' compiled loops reach no FMU build and no FMU source: ``harness.master_loop`` and
@@ -42,22 +42,30 @@ TOOLCHAIN = f"{BUILD}.toolchain"
 CORE = {"harness", "harness.__main__", "harness.cli", "harness.cli_args", "harness.scenario", "harness.variants",
         "harness.fmi", "harness.scenario_checks", "harness.master", "harness.compiled_loop", "harness.loop_interface",
         "harness.master_loop", "harness.scores", "harness.cases", "harness.units", "harness.me_master",
-        "harness.me_loop", "harness.cvode", "harness.scenario_toml", "harness.progress", "harness.termination"}
+        "harness.me_loop", "harness.cvode", "harness.scenario_toml", "harness.progress", "harness.termination",
+        "harness.unpack", "harness.atomic_files", "harness.executors", "harness.executors.tasks",
+        "harness.executors.local_pool", "harness.executors.dask_pool", "harness.executors.choose",
+        "harness.executors.stream"}
 COMPOSITION_ROOT = "harness.cli"
 STUDIES, HOSTS = "harness.studies", "harness.hosts"
 #: what the master's compiled loop may never reach, directly or through other modules
 LOOP_FORBIDDEN = (NATIVE_BUILD, NATIVE_STAGES, BUILDER, f"{BUILD}.catalog", f"{BUILD}.staging", "plants", "fmu_src")
 #: modules of one idea each that build on one another: each imports only those before it in its chain
-#: (harness/studies/tune/__init__.py and harness/hosts/matrix.py say what each holds)
+#: (harness/studies/tune/__init__.py, harness/studies/regression/__init__.py and harness/hosts/matrix.py say what
+#: each holds)
 CHAINS = {
     "harness.studies.tune": ("errors", "space", "objective", "candidate", "config", "storage", "loop",
                              "scenario_file", "summary", "report", "comparison", "study", "command_line"),
+    "harness.studies.regression": ("runs", "references", "comparison", "figures", "report", "command"),
+    "harness.executors": ("tasks", "local_pool", "dask_pool", "choose", "stream"),
+    "harness.studies.sweep": ("grid", "csv_rows", "executors", "heatmap", "run", "command_line"),
     "harness.hosts": ("trajectory", "console_capture", "plain_fmpy", "host_runners", "host_registry", "matrix_row",
                       "matrix_prose", "matrix_report", "matrix"),
     NATIVE_STAGES: ("targets", "model_exchange", "description", "header", "compiler", "sources", "ls_ref", "package"),
 }
 #: packages whose every module is in their chain (harness/hosts/ holds other hosts' bindings beside its chain)
-WHOLE_CHAINS = ("harness.studies.tune", NATIVE_STAGES)
+WHOLE_CHAINS = ("harness.executors", "harness.studies.tune", "harness.studies.regression", "harness.studies.sweep",
+                NATIVE_STAGES)
 
 
 @dataclass(frozen=True)
@@ -276,6 +284,7 @@ def test_the_graph_sees_the_imports_it_must_see():
     assert ("harness.cli", "harness.studies.tables") in imports
     assert ("harness.hosts.matrix", "harness.studies.step_study") in imports
     assert ("harness.studies.tune.study", "harness.studies.tune.loop") in imports
+    assert ("harness.studies.regression.command", "harness.studies.regression.comparison") in imports
     assert ("harness.hosts.host_registry", "harness.hosts.host_runners") in imports
 
 

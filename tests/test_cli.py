@@ -398,7 +398,7 @@ def test_es1_es2_are_marked_n_a_on_a_horizon_shorter_than_the_reference_period(f
 
 
 def test_sweep_writes_docs_only_with_apply_and_says_what_it_changed(fmu_paths, tmp_path, monkeypatch, capsys):
-    from harness.studies import sweep
+    from harness.studies.sweep import command_line as sweep
 
     docs = tmp_path / "docs"
     docs.mkdir()

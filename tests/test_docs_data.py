@@ -106,6 +106,9 @@ def step_phrases() -> list:
         ("docs/studies.md", f"needs a {vud} smaller step than our feedthrough-aware master for `vud`, and up to "
                             f"{others} for the comparison controllers"),
         ("docs/host_robustness.md", f"needs a {vud} smaller step than a feedthrough master for `vud`"),
+        ("docs/master.md", f"half its plain scenario's validated {quantity(chosen['pendulum_case2'])}, so that each "
+                           f"1 kHz sample instant is a communication point; the manipulator at its validated "
+                           f"{quantity(chosen['manipulator'])}"),
     ]
 
 

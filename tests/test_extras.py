@@ -83,6 +83,12 @@ def ssp_package(fmu_paths, tmp_path_factory):
     ("sweep on a cluster without dask", ("dask", "distributed"),
      ("sweep", "pendulum_case1", "--grid", "plant.mp=0.1", "--stop", "0.01", "--scheduler", "tcp://localhost:1",
       "--out", "{tmp}/sweep"), "cluster"),
+    ("tune on a cluster without dask", ("dask", "distributed"),
+     ("tune", "pendulum_case1", "--stop", "0.05", "--trials", "1", "--scheduler", "tcp://localhost:1",
+      "--out", "{tmp}/tune"), "cluster"),
+    ("tune on PostgreSQL without its driver", ("psycopg",),
+     ("tune", "pendulum_case1", "--stop", "0.05", "--trials", "1", "--storage",
+      "postgresql+psycopg://afc@127.0.0.1:1/tune", "--out", "{tmp}/tune"), "postgres"),
     ("mutate without pytest", ("pytest",), ("mutate", "--only", "theta_euler_sign"), "test"),
     ("the native build without zig", ("ziglang",), ("build_fmu.py", "--edition", "native"), "native"),
 ])

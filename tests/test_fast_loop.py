@@ -130,3 +130,23 @@ def test_the_readme_and_ci_run_the_whole_suite():
     options = command.split("python -m pytest", 1)[1]
     assert not re.search(r"(^|\s)(-m|-k|--deselect|--lf|--last-failed)\b", options), \
         f"README's test command deselects tests: {command}"
+
+
+def test_ci_requires_the_servers_the_tests_start(monkeypatch):
+    """.ci/run installs PostgreSQL and sets AFC_REQUIRE_SERVERS=1: there the PostgreSQL and Dask fixtures fail
+    where they would skip elsewhere, so that CI runs those tests or says why not."""
+    import pytest
+
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert re.search(r"(?m)^export AFC_REQUIRE_SERVERS=1$", ci), ".ci/run: export AFC_REQUIRE_SERVERS=1"
+    assert re.search(r"apt-get install [^\n]*\bpostgresql\b", ci), ".ci/run: apt-get install postgresql"
+    assert ci.index("AFC_REQUIRE_SERVERS=1") < ci.index("python -m pytest")
+    outcomes = []
+    for required in (True, False):
+        monkeypatch.setattr(conftest, "REQUIRE_SERVERS", required)
+        try:
+            conftest._unavailable("no server")
+        except (pytest.fail.Exception, pytest.skip.Exception) as outcome:  # a skip caught here, not the test's
+            outcomes.append((type(outcome), str(outcome)))
+    assert outcomes == [(pytest.fail.Exception, "no server; AFC_REQUIRE_SERVERS=1 (.ci/run) requires it"),
+                        (pytest.skip.Exception, "no server")]

@@ -85,7 +85,7 @@ def test_every_invalid_parameter_fails_initialisation_naming_it_its_value_and_ra
 MOMENTS = ("initialisation", "first point", "mid-run")
 INPUT_CASES = [(fmu_id, name) for fmu_id in FMU_IDS for name in inputs_of(fmu_id)]
 GOOD_INPUTS = {"e": 0.2, "de": -0.1, "ym": 0.3, "dym": 0.5, "u": 1.5, "y": 0.1, "dy": -0.2,
-               "d2e": 0.3, "d3e": -0.2, "d2ym": -0.3, "d3ym": -0.5, "d2y": 0.4}  # order 3, 4
+               "d2e": 0.3, "d3e": -0.2, "d2ym": -0.3, "d3ym": -0.5, "d2y": 0.4, "d3y": -0.6}  # order 3, 4
 
 
 def start_at(fmu_paths, unzipped, fmu_id, moment, steps=50, h=1e-3):

@@ -12,7 +12,7 @@ from harness.fmu_build import staging as fmu_staging
 from plants import registry
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_C = {"fmi_layer.c", "rk4_plant_slave.c", "plant_integration.c"}  # compiled into several FMUs
+SHARED_C = {"fmi_layer.c", "rk4_plant_slave.c", "plant_integration.c", "sampled_slave.c", "sampled_chain.c"}  # in several FMUs
 
 
 def test_every_model_folder_is_one_row_and_every_fmu_file_is_in_one():
@@ -58,12 +58,19 @@ def test_an_unknown_identifier_names_the_valid_ones():
 
 
 def test_every_plant_row_declares_its_model_exchange_interface(monkeypatch, capsys):
-    """Every model folder's fmu.py declares model_exchange(): an RK4 plant's states are its RK4 states;
-    a script without one stops the native build with one line naming the file, not an AttributeError."""
+    """Every model folder's fmu.py declares model_exchange(): an RK4 plant's states are its RK4 states, the
+    reference has none, a sampled FMU announces its samples as time events (the actuator's state is its
+    rate limiter's); a script without one stops the native build with one line naming the file, not an
+    AttributeError."""
+    expected = {"reference": (), "sampled": {"Sensor": (), "Actuator": ("slew_state",)}}
     for row in registry.PLANT_FMUS:
         me = native_model_exchange.model_exchange(row.model_identifier)
-        states = len(fmu_catalog.model_class(row.model_identifier).STATE_ATTRIBUTES) if row.integrated else 0
-        assert len(me.states) == states, row.model_identifier  # y, dy, ... of an RK4 plant; none else
+        if row.integrated:  # y, dy, ... of an RK4 plant
+            assert len(me.states) == len(fmu_catalog.model_class(row.model_identifier).STATE_ATTRIBUTES)
+        elif row.kind == "sampled":
+            assert me.states == expected["sampled"][row.model_identifier] and me.time_events, row.model_identifier
+        else:
+            assert me.states == expected[row.kind] and not me.time_events, row.model_identifier
     monkeypatch.delattr(fmu_catalog.declaration("Manipulator"), "model_exchange")
     with pytest.raises(build_native.NativeBuildError, match="Manipulator declares no model_exchange"):
         description.model_guid("Manipulator")  # where a build of the native FMU first asks for it

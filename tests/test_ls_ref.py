@@ -98,3 +98,13 @@ def test_stored_experiments_are_compats(python_fmus):
 def test_a_missing_experiment_is_one_clear_error():
     with pytest.raises(KeyError, match="no FMI-LS-REF experiment of Nope .*--ls-ref-experiments"):
         ls_ref.load("Nope")
+
+
+def test_a_new_fmus_first_build_leaves_fmi_ls_ref_out_and_says_so(monkeypatch, capsys):
+    """Before its experiment is stored (the recipe's first build of a new FMU), the builds leave FMI-LS-REF
+    out with a note naming the command that writes it; once stored, they embed it."""
+    monkeypatch.setattr(ls_ref, "stored_models", lambda: ["InvertedPendulum"])
+    assert build_fmu.ls_ref_model("Sensor") is None
+    note = capsys.readouterr().err
+    assert note.startswith("note: Sensor: no FMI-LS-REF experiment stored yet") and "--fmu Sensor" in note
+    assert build_fmu.ls_ref_model("InvertedPendulum") == "InvertedPendulum" and not capsys.readouterr().err

@@ -142,7 +142,7 @@ def test_divergence_keeps_the_partial_result_in_the_exception(fmu_paths):
 
 @pytest.mark.parametrize("edit,expected", [
     (lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "NoSuchModel"'),
-     "unknown FMU 'NoSuchModel'; valid: AdaptiveFuzzyController, DcMotorArm, InvertedPendulum"),
+     "unknown FMU 'NoSuchModel'; valid: Actuator, AdaptiveFuzzyController, DcMotorArm, InvertedPendulum"),
     (lambda t: t.replace('fmu = "TrackingReference"', 'fmu = "missing/Reference.fmu"'), "FMU file not found"),
     (lambda t: t.replace('from = "plant.y"', 'from = "plnt.y"'),
      "[[connections]] 1: from = 'plnt.y': unknown instance 'plnt' (did you mean 'plant'?); valid: plant, reference, "

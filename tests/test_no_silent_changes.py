@@ -9,7 +9,8 @@ import pytest
 
 from harness.fmu_build import builder as build_fmu
 from harness import scenario as scenarios
-from harness.studies import sweep_executors, sweep_grid
+from harness.executors import tasks
+from harness.studies.sweep import grid as sweep_grid
 from harness.cases import Case, run_case
 from harness.cli import main as cli_main
 from harness.scenario import ScenarioError
@@ -117,23 +118,22 @@ def test_two_builds_at_once_leave_one_whole_fmu(tmp_path):
 
 # ---------------------------------------------------------- Dask FMU cache
 def test_the_worker_cache_replaces_a_file_whose_hash_is_wrong(fmu_paths, tmp_path, monkeypatch):
-    monkeypatch.setattr(sweep_executors, "_fmu_cache_dir", lambda: tmp_path)
+    monkeypatch.setattr(tasks, "cache_dir", lambda: tmp_path)
     data = fmu_paths["TrackingReference"].read_bytes()
     digest = hashlib.sha256(data).hexdigest()
     cached = tmp_path / digest[:20] / "TrackingReference.fmu"
     cached.parent.mkdir()
     cached.write_bytes(data[:1000])  # a file cut short (or another FMU) already at the cache path
-    case = sweep_executors._with_cached_fmus(Case("pendulum_case1", "vud"),
-                                             {"reference": (digest, "TrackingReference.fmu")}, {digest: data})
-    assert case.fmu_files == (("reference", str(cached)),)
+    assert tasks.cached_file(digest, "TrackingReference.fmu", {digest: data}) == cached
     assert cached.read_bytes() == data  # replaced from the bytes received, not trusted
     good = cached.stat().st_mtime_ns
-    sweep_executors._with_cached_fmus(Case("pendulum_case1", "vud"),
-                                      {"reference": (digest, "TrackingReference.fmu")}, {digest: data})
+    tasks.cached_file(digest, "TrackingReference.fmu", {digest: data})
     assert cached.stat().st_mtime_ns == good  # a good file is used as it is
     with pytest.raises(RuntimeError, match="do not have the SHA-256"):
-        sweep_executors._with_cached_fmus(Case("pendulum_case1", "vud"),
-                                          {"reference": ("0" * 64, "TrackingReference.fmu")}, {"0" * 64: data})
+        tasks.cached_file("0" * 64, "TrackingReference.fmu", {"0" * 64: data})
+    shipment, blobs = tasks.Shipment.of({"reference": fmu_paths["TrackingReference"]})
+    assert tasks.local_files(shipment, blobs) == {"reference": cached}  # a worker's files, by name
+    tasks.forget_worker_state()
 
 
 def test_tables_refuse_a_stop_off_the_step_grid_before_any_run(fmu_paths, tmp_path, capsys, monkeypatch):

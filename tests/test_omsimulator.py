@@ -1,8 +1,9 @@
 """OpenModelica's OMSimulator as a host (harness/hosts/omsimulator.py, the host matrix's omsimulator-* rows).
 
 OMSimulator cannot be installed from the package registries here; the tests use the build in
-../shared/tools/omsimulator (its env.sh unpacks it once and names its Python package) and skip where that folder
-is absent.  What they hold (docs/hosts.md):
+../shared/tools/omsimulator (or ../../shared/tools/omsimulator from a worktree in a folder of worktrees; its
+env.sh unpacks it once and names its Python package) and skip where that folder is absent.  What they hold
+(docs/hosts.md):
 
 * its C API (``oms_importFile``) takes the co-simulation step from our package's ``org.openmodelica`` annotation
   and its co-simulation master gives our feedthrough master's trajectory to the last digits;
@@ -11,7 +12,9 @@ is absent.  What they hold (docs/hosts.md):
   through the manipulator's friction events); its results are first order in its maximum step (its
   communication interval, where it also writes results): over 0.5 s of the pendulum Ec is 0.46 %, 0.11 %,
   0.022 % off our Model Exchange result at 0.5 ms, 0.1 ms, 25 us (over 20 s at 0.5 ms: ITAE -0.022 %);
-* FMI 3.0: its co-simulation master runs the FMI 3.0 FMUs; its strongly coupled mode refuses them.
+* FMI 3.0: its co-simulation master runs the FMI 3.0 FMUs; its strongly coupled mode refuses them;
+* nothing is printed after a process that ran it ends (it printed its count of logged errors at exit, after
+  pytest's summary line: harness/hosts/omsimulator.py's flush_log_counts).
 """
 from __future__ import annotations
 
@@ -31,7 +34,9 @@ from harness.hosts.ssp import export_ssp
 from harness.master import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "tools" / "omsimulator"
+SHARED = next((folder / "shared" / "tools" / "omsimulator" for folder in (ROOT.parent, ROOT.parent.parent)
+               if (folder / "shared" / "tools" / "omsimulator" / "env.sh").exists()),
+              ROOT.parent / "shared" / "tools" / "omsimulator")
 NAMES = ["plant.y", "plant.dy", "reference.ym", "reference.dym", "controller.u"]
 
 pytestmark = [pytest.mark.skipif(not (SHARED / "env.sh").exists(), reason="../shared/tools/omsimulator is absent"),
@@ -117,3 +122,32 @@ def test_fmi3_co_simulation_runs_and_its_strongly_coupled_mode_refuses_it(oms, t
     package = export_ssp(scenario, tmp_path / "me.ssp", fmu_paths=native3, rtol=1e-8)
     with pytest.raises(RuntimeError, match="oms_addSubModel"):
         omsimulator.run_python_api(package, scenario.stop, NAMES, output_step=5e-4)
+
+
+AFTER_THE_END = """
+import sys
+sys.path.insert(0, sys.argv[1])
+from harness import scenario as scenarios
+from harness.fmu_build import builder as build_fmu
+from harness.hosts import omsimulator
+from harness.hosts.ssp import export_ssp
+scenario = scenarios.configure("pendulum_case1", "vud", 5e-4, 0.01)
+package = export_ssp(scenario, sys.argv[2], fmu_paths=build_fmu.ensure_built(edition="native3"), rtol=1e-8)
+try:
+    omsimulator.run_python_api(package, scenario.stop, ["plant.y"], output_step=5e-4)
+except RuntimeError as error:
+    print("refused:", error)
+print("THE END", flush=True)
+"""
+
+
+def test_nothing_is_printed_after_a_process_that_ran_it_ends(oms, tmp_path):
+    """A run OMSimulator logged an error in (its strongly coupled mode refusing FMI 3.0) printed 'info:    0
+    warnings' and 'info:    1 errors' when the process exited: after pytest's summary line in a green run."""
+    build_fmu.ensure_built(edition="native3")
+    completed = subprocess.run([sys.executable, "-c", AFTER_THE_END, oms, str(tmp_path / "me.ssp")], cwd=ROOT,
+                               capture_output=True, text=True, timeout=300)
+    assert completed.returncode == 0, completed.stderr
+    output = completed.stdout
+    assert "refused: Failed to add oms_addSubModel" in output
+    assert output.rstrip().endswith("THE END"), output[output.find("THE END"):]

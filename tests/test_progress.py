@@ -72,10 +72,14 @@ def test_the_lines_show_the_share_of_the_steps_and_the_time_left_from_the_board(
     with Progress(2, "tables", stream=stream, board=board, workers=2) as bar:
         board.fractions[0] = 0.6  # what a worker writes through step_reporter
         board.finish(1)
-        bar.update(label="short")
-    first = stream.getvalue().splitlines()[0]
-    assert re.fullmatch(r"tables: 1/2 runs done in \d+ s \(70 % of the steps\), about \d+ s left \(last: short\)",
-                        first), first
+        bar.update(label="short")  # the work first seen done: the rate's origin
+        time.sleep(0.01)
+        board.fractions[0] = 0.7
+        bar._line(bar._status())
+    first, second = stream.getvalue().splitlines()[:2]
+    assert re.fullmatch(r"tables: 1/2 runs done in \d+ s \(70 % of the steps\) \(last: short\)", first), first
+    assert re.fullmatch(r"tables: 1/2 runs done in \d+ s \(78 % of the steps\), about \d+ s left \(last: short\)",
+                        second), second
     stream = io.StringIO()
     board = WorkBoard([1000, 1000], unit="step")
     with Progress(2, "tables", stream=stream, board=board, workers=2) as bar:
@@ -86,6 +90,34 @@ def test_the_lines_show_the_share_of_the_steps_and_the_time_left_from_the_board(
     early, later = stream.getvalue().splitlines()[:2]
     assert early.endswith("(1 % of the steps)") and "left" not in early, early
     assert later.endswith("s left"), later
+
+
+class FakeClock:
+    """perf_counter() under the test's control."""
+
+    def __init__(self):
+        self.now = 1000.0
+
+    def perf_counter(self):
+        return self.now
+
+
+def test_the_time_left_counts_the_loops_own_rate_not_the_start(monkeypatch):
+    """`harness run` said "30/6000 steps done in 19 s, about 3805 s left" and finished a second later: the 19 s
+    of building and instantiating the FMUs were counted as time the steps took."""
+    fake = FakeClock()
+    monkeypatch.setattr(progress_module, "clock", fake)
+    monkeypatch.setattr(progress_module, "PROGRESS_LINE_EVERY_S", 3600.0)
+    stream = io.StringIO()
+    with Progress(6000, "my_loop/vud", unit="step", stream=stream, bar=False) as bar:
+        fake.now += 19.0  # the start: no step yet
+        bar.update(30)  # the master's first report
+        assert bar.time_left_s() is None  # one report: no rate yet
+        fake.now += 0.1  # 30 more steps in 0.1 s
+        bar.update(30)
+        left = bar.time_left_s()
+        assert left == pytest.approx(5940 / 300, rel=1e-6)  # 19.8 s, not the start's 1890 s
+        assert "about 20 s left" in bar._status()
 
 
 def test_step_reporter_writes_the_items_fraction_and_is_none_without_a_board():
@@ -120,8 +152,10 @@ def test_on_a_terminal_the_clock_redraws_the_bar_with_the_work_done(monkeypatch)
     board = WorkBoard([100, 100], unit="step")
     terminal = Terminal()
     with Progress(2, "tables", stream=terminal, board=board, workers=2):
+        board.fractions[0] = 0.4
+        time.sleep(0.3)  # no update: the clock draws it (and takes the rate's origin)
         board.fractions[0] = 0.5
-        time.sleep(0.6)  # no update: the clock draws it
+        time.sleep(0.4)
         drawn = terminal.getvalue()
     assert " 25%|" in drawn and "0/2 runs done" in drawn and "s left" in drawn, drawn
 

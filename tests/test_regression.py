@@ -132,10 +132,10 @@ def test_tube_passes_small_shift_and_flags_a_bump_where_it_is():
 
 
 def test_cli_exit_codes_and_hint(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(regression, "run_cases", lambda cases, **kw: [fabricated_run(c) for c in cases])
+    monkeypatch.setattr(regression.command, "run_cases", lambda cases, **kw: [fabricated_run(c) for c in cases])
     assert cli_main(["regress", "pendulum_case1", "--controller", "vud", "--report", str(tmp_path)]) == 0
     assert "1/1 cases pass" in capsys.readouterr().out
-    monkeypatch.setattr(regression, "REFERENCE_DIR", tmp_path / "empty")
+    monkeypatch.setattr(regression.references, "REFERENCE_DIR", tmp_path / "empty")
     assert cli_main(["regress", "pendulum_case1", "--controller", "vud", "--report", str(tmp_path)]) == 1
     captured = capsys.readouterr()
     assert "regress pendulum_case1 --update" in captured.err and "FAIL" in captured.out

@@ -1,4 +1,4 @@
-"""`regress` on a user's own scenario, and its outputs (harness/studies/regression_report.py).
+"""`regress` on a user's own scenario, and its outputs (harness/studies/regression/).
 
 The plant is one the project does not ship: a first-order lag made with plain pythonfmu in the test
 (tests/data/first_order_lag_fmu.py), wired to our controller by docs/ci/lag_loop.toml in a user's
@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from harness.cli import main as cli_main
-from harness.studies import regression, regression_report
+from harness.studies import regression
 from harness.studies.regression import Case
 from tests.user_repo import make_user_repo
 
@@ -296,13 +296,13 @@ def test_a_run_more_than_twice_as_slow_as_its_reference_is_flagged(flow, mutated
                                  junit=tmp_path / "junit.xml")
     comparison = outcome.comparisons[0]
     assert comparison.passed and comparison.slowdown == pytest.approx(3.0 / 1.4)
-    assert "2.1x slower than the reference run" in regression_report.slowness(comparison)
+    assert "2.1x slower than the reference run" in regression.slowness(comparison)
     slow = junit(tmp_path / "junit.xml").find("testsuite/testcase/properties/property[@name='slow']")
     assert slow is not None and slow.get("value").startswith("2.1x slower")
     assert "2.1x slower" in (tmp_path / "report" / "report.html").read_text()
     edit_meta(folder, wall_s=1.6)  # 1.9x: not flagged
     outcome = regression.regress([case], runs=[run], reference_dir=folder, report_dir=None)
-    assert regression_report.slowness(outcome.comparisons[0]) == ""
+    assert regression.slowness(outcome.comparisons[0]) == ""
 
 
 def test_an_edited_scenario_file_is_detected_by_its_hash_and_the_change_is_named(flow, fmu_paths, tmp_path):
@@ -330,3 +330,70 @@ def test_junit_with_update_and_a_file_as_references_are_usage_errors(flow):
     assert status == 2 and "--junit with --update" in err
     status, _, err = run_cli([*REGRESS[:-1], "ci/lag_loop.toml"], flow["repo"])
     assert status == 2 and "not a folder" in err
+
+
+# ------------------------------------------------------------ names that hold HTML or shell syntax
+HOSTILE = "<img src=y onerror=alert(1)>"  # a scenario file's name (the case's), in a folder a shell would split
+
+
+def hostile_case(tmp_path) -> tuple:
+    """A user's scenario file HOSTILE.toml in a folder named with a space, a quote, '&' and '<b>'."""
+    from harness import scenario as scenarios
+
+    folder = tmp_path / "it's & <b>mine"
+    folder.mkdir()
+    path = folder / f"{HOSTILE}.toml"
+    path.write_text((scenarios.SCENARIO_DIR / "pendulum_case1.toml").read_text())
+    return Case(str(path), "vud"), path
+
+
+def fabricated(case, scale: float = 1.0) -> "regression.CaseRun":
+    """A run of ``case`` made from the committed reference of pendulum_case1 (no simulation), plant.y scaled."""
+    reference = regression.read_reference(Case("pendulum_case1", "vud"))
+    signals = {name: reference.signals[name] * (scale if name == "plant.y" else 1.0)
+               for name in regression.case_signals(case) if name in reference.signals}
+    return regression.CaseRun(case, 0.0, 20.0, 0.0005, reference.time.copy(), signals, 1.0)
+
+
+def test_report_md_shows_html_in_names_as_text_and_the_html_report_escapes_it(tmp_path):
+    case, _ = hostile_case(tmp_path)
+    folder = tmp_path / "references"
+    regression.regress([case], runs=[fabricated(case)], reference_dir=folder, update=True, report_dir=None)
+    outcome = regression.regress([case], runs=[fabricated(case, 1.01)], reference_dir=folder,
+                                 report_dir=tmp_path / "report")
+    assert not outcome.passed
+    markdown = (tmp_path / "report" / "report.md").read_text()
+    assert HOSTILE.split()[0] not in markdown and "<" not in markdown  # no raw HTML at all
+    assert markdown.count("&lt;img src=y onerror=alert(1)&gt;") >= 10  # the name, shown as written, in every row
+    assert "![](" in markdown and "**FAIL**" in markdown  # the report's own Markdown is kept
+    page = (tmp_path / "report" / "report.html").read_text()
+    assert HOSTILE not in page and "&lt;img src=y onerror=alert(1)&gt;" in page
+
+
+def test_the_missing_references_hint_is_a_command_a_shell_runs_as_printed(tmp_path, monkeypatch, capsys):
+    import shlex
+
+    case, path = hostile_case(tmp_path)
+    monkeypatch.setattr(regression.command, "run_cases", lambda cases, **kw: [fabricated(c) for c in cases])
+    empty = tmp_path / "no refs & <here>"
+    assert cli_main(["regress", str(path), "--controller", "vud", "--references", str(empty), "--report",
+                     str(tmp_path / "report")]) == 1
+    hint = capsys.readouterr().err.strip().splitlines()[-1]
+    command = re.fullmatch(r"missing references: create them with `(.*)`", hint).group(1)
+    assert shlex.split(command) == ["python", "-m", "harness", "regress", str(path), "--update", "--references",
+                                    str(empty)]
+    message = regression.compare_case(fabricated(case), None, reference_dir=empty).message
+    quoted = re.search(r"run (`+) ?(.*?) ?\1 to create it", message).group(2)
+    assert shlex.split(quoted) == ["python", "-m", "harness", "regress", str(path), "--controller", "vud", "--update",
+                                   "--references", str(empty)]
+
+
+@pytest.mark.parametrize("name", ["../../escaped", "a/b", ".hidden"])
+def test_a_scenario_name_that_would_put_references_elsewhere_is_refused(tmp_path, name):
+    from harness import scenario as scenarios
+
+    scenario = scenarios.load("pendulum_case1")
+    scenario.name = name  # a Scenario built in Python: its name, not a file's stem, names the case
+    with pytest.raises(regression.references.cli_args.UsageError, match=f"scenario name {re.escape(repr(name))} "
+                                                                         "cannot name a reference file"):
+        regression.reference_paths(Case(scenario, "vud"), tmp_path / "references")

@@ -91,8 +91,11 @@ def test_defaults_come_from_the_schema():
         scenarios.parse({**data, "controller_instance": "controller"})
     with pytest.raises(ScenarioError, match=r"\[components\] has no instance"):
         scenarios.parse({**data, "components": {}})
-    with pytest.raises(ScenarioError, match=r"\[components\] instance name 'a.b' must not contain '.'"):
-        scenarios.parse({**data, "components": {"a.b": {"fmu": "X"}}})
+    for name in ("a.b", "a/b", "réf", "a b", "1st", "a-b", "<img>", ""):
+        with pytest.raises(ScenarioError, match=rf"\[components\] instance name {re.escape(repr(name))} is not "
+                                                r"allowed: use ASCII letters, digits and '_', not starting with a digit"):
+            scenarios.parse({**data, "components": {name: {"fmu": "X"}}})
+    assert scenarios.parse({**data, "components": {"c": {"fmu": "TrackingReference"}, "_plant2": {"fmu": "X"}}})
     with pytest.raises(ScenarioError, match=r"\[record\] variables: element 2 = 3 is not a string"):
         scenarios.parse({**data, "record": {"variables": ["c.e", 3]}})
 

@@ -93,7 +93,21 @@ BAD_FMU_FILES = [  # (what, make(path), the error's tail after "[components.refe
     ("a model description that is not XML", lambda p: _zip(p, {"modelDescription.xml": "not < xml"}),
      ": its modelDescription.xml cannot be read: "),
     ("a folder", lambda p: p.mkdir(), " is a folder, not an FMU file"),
+    ("a model description that is not UTF-8", lambda p: _latin1_description(p),
+     ": its modelDescription.xml cannot be read: Invalid bytes in character encoding (FMI model descriptions are "
+     "UTF-8 XML)"),
 ]
+
+
+def _latin1_description(path):
+    """TrackingReference.fmu with its model description in Latin-1 (an 'é' of its own), not UTF-8."""
+    source = build_fmu.ROOT / "build/fmus/TrackingReference.fmu"
+    with zipfile.ZipFile(source) as old, zipfile.ZipFile(path, "w") as new:
+        for info in old.infolist():
+            data = old.read(info)
+            if info.filename == "modelDescription.xml":
+                data = data.decode().replace('description="', 'description="caf\xe9 ', 1).encode("latin-1")
+            new.writestr(info, data)
 
 
 @pytest.mark.parametrize("what,make,tail", BAD_FMU_FILES, ids=[case[0] for case in BAD_FMU_FILES])
@@ -107,3 +121,58 @@ def test_a_file_that_is_not_an_fmu_is_named_with_what_it_is(fmu_paths, tmp_path,
     assert len(lines) == 1 and "Traceback" not in err, err
     assert lines[0].startswith(f"error: {path}: [components.reference] fmu = 'bad.fmu': {tmp_path / 'bad.fmu'}{tail}"), \
         lines[0]
+
+
+def test_a_binary_scenario_file_is_one_line_naming_it(tmp_path, capsys):
+    """It exited 1 with a UnicodeDecodeError that named no file."""
+    path = tmp_path / "binary.toml"
+    path.write_bytes(bytes(range(256)))
+    assert cli_main(["run", str(path)]) == 2
+    assert capsys.readouterr().err.strip() == (f"error: {path} is not a TOML file: byte 128 is not UTF-8 text "
+                                               "(invalid start byte)")
+
+
+@pytest.mark.parametrize("name", ["a/b", "réf", "<img src=x>"])
+def test_an_instance_name_outside_the_rule_is_one_line_with_the_rule(tmp_path, capsys, name):
+    """'a/b' reached mkdtemp (FileNotFoundError), 'réf' crashed the pythonfmu FMU's host (its resource URI)."""
+    path = edited_scenario(tmp_path, lambda t: t.replace("[components.reference]", f'[components."{name}"]'))
+    assert cli_main(["run", str(path), "--stop", "0.01"]) == 2
+    assert capsys.readouterr().err.strip() == (f"error: {path}: [components] instance name {name!r} is not allowed: "
+                                               "use ASCII letters, digits and '_', not starting with a digit")
+
+
+def _package_with(tmp_path, fmu_paths, ssd: bytes | None) -> "Path":
+    """An exported SSP package whose SystemStructure.ssd is replaced by ``ssd``."""
+    from harness.hosts.ssp import export_ssp
+
+    exported = export_ssp(scenarios.configure("pendulum_case1", "vud", stop=0.01), tmp_path / "good.ssp",
+                          fmu_paths=fmu_paths)
+    target = tmp_path / "edited.ssp"
+    with zipfile.ZipFile(exported) as old, zipfile.ZipFile(target, "w") as new:
+        for info in old.infolist():
+            new.writestr(info, ssd if info.filename == "SystemStructure.ssd" else old.read(info))
+    return target
+
+
+SSD_MISTAKES = [  # (what, SystemStructure.ssd, the error after "error: <package>: ")
+    ("not XML", b"garbage", "SystemStructure.ssd is not well-formed XML: syntax error: line 1, column 0"),
+    ("no system", b'<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"'
+                  b' version="1.0" name="x"/>',
+     "SystemStructure.ssd has no <System> in the SSP 1.0 namespace http://ssp-standard.org/SSP1/"
+     "SystemStructureDescription (its root is <SystemStructureDescription>); an SSP package describes one system"),
+    ("a component whose FMU is missing",
+     b'<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
+     b'version="1.0" name="x"><ssd:System name="s"><ssd:Elements><ssd:Component name="plant" '
+     b'source="resources/Missing.fmu"/></ssd:Elements></ssd:System></ssd:SystemStructureDescription>',
+     "component 'plant' names the source 'resources/Missing.fmu', which the package does not hold"),
+]
+
+
+@pytest.mark.parametrize("engine", ["fmpy", "ecos"])
+@pytest.mark.parametrize("what,ssd,expected", SSD_MISTAKES, ids=[m[0] for m in SSD_MISTAKES])
+def test_a_broken_system_structure_is_one_line_naming_the_package(fmu_paths, tmp_path, capsys, engine, what, ssd,
+                                                                  expected):
+    """No system gave "'NoneType' object has no attribute 'findall'", bad XML "syntax error: line 1" alone."""
+    package = _package_with(tmp_path, fmu_paths, ssd)
+    assert cli_main(["run-ssp", str(package), "--engine", engine]) == 2
+    assert capsys.readouterr().err.strip() == f"error: {package}: {expected}"

@@ -1,5 +1,6 @@
-"""harness/termination.py: SIGTERM ends a command and its pool's workers as Ctrl-C does (exit 143), and
-`tables` under a pipe on a loaded CPU says how far it is within 10 s of wall time (harness/progress.py)."""
+"""harness/termination.py: SIGTERM ends a command and its pool's workers as Ctrl-C does (exit 143); SIGKILL of
+the command leaves no worker behind (they notice their parent is gone); `tables` under a pipe on a loaded CPU
+says how far it is within 10 s of wall time (harness/progress.py)."""
 from __future__ import annotations
 
 import os
@@ -136,3 +137,47 @@ def test_tables_under_a_pipe_on_a_loaded_cpu_says_how_far_within_10_s_and_sigter
     finally:
         load.kill()
         load.wait()
+
+
+#: commands whose local pool computes for a while (pythonfmu edition: runs of seconds)
+POOL_COMMANDS = {
+    "sweep": ["sweep", "pendulum_case2", "--grid", "plant.mp=0.1:2:8", "--stop", "5", "--jobs", "2", "--no-progress",
+              "--edition", "python", "--out", "{out}"],
+    "tune": ["tune", "pendulum_case1", "--trials", "200", "--jobs", "2", "--stop", "3", "--edition", "python",
+             "--quiet", "--held-out", "--out", "{out}"],
+    "tables": ["tables", "--jobs", "2", "--edition", "python", "--out", "{out}"],
+}
+
+
+def pool_workers(command: subprocess.Popen, count: int, timeout_s: float) -> list:
+    """The command's spawned pool workers once ``count`` of them have computed for a moment."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and command.poll() is None:
+        workers = [p for p in psutil.Process(command.pid).children(recursive=True)
+                   if "spawn_main" in " ".join(p.cmdline())]
+        if len([p for p in workers if sum(p.cpu_times()[:2]) > 0.3]) >= count:
+            return workers
+        time.sleep(0.1)
+    pytest.fail(f"fewer than {count} busy pool workers under the command within {timeout_s} s")
+
+
+@pytest.mark.parametrize("name", POOL_COMMANDS)
+def test_sigkill_of_the_command_leaves_no_pool_worker_behind(fmu_paths, tmp_path, name):
+    scratch = tmp_path / "temp"  # what a killed command cannot clean up stays in tmp_path
+    scratch.mkdir()
+    argv = [part.format(out=tmp_path / "out") for part in POOL_COMMANDS[name]]
+    command = subprocess.Popen([sys.executable, "-m", "harness", *argv], cwd=ROOT, stdin=subprocess.DEVNULL,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               env=dict(os.environ, TMPDIR=str(scratch)))
+    below = []
+    try:
+        workers = pool_workers(command, 2, 120.0)
+        below = psutil.Process(command.pid).children(recursive=True)  # the workers and the resource tracker
+        command.kill()  # the command only: its workers are reparented, as when a user's kill -9 hits it
+        command.wait(10)
+        assert gone_within(workers, 15.0) == [], f"{name}: workers left computing after the command died"
+        assert gone_within(below, 10.0) == []
+    finally:
+        end_tree(command)
+        for process in alive(below):
+            process.kill()

@@ -25,7 +25,7 @@ from harness import scenario as scenarios  # noqa: E402
 from harness import variants  # noqa: E402
 from harness.cli import main as cli_main  # noqa: E402
 from harness.scenario_toml import scenario_toml  # noqa: E402
-from harness.studies.tune import candidate, comparison, config as tune_config, space, storage  # noqa: E402
+from harness.studies.tune import candidate, comparison, config as tune_config, loop, space, storage  # noqa: E402
 from harness.studies.tune import tune  # noqa: E402
 from harness.studies.tune.summary import pareto_front  # noqa: E402
 
@@ -350,9 +350,9 @@ def test_the_same_seed_gives_the_same_trials(tmp_path, paths, edition):
 
 
 # ------------------------------------------------------------------ processes and the database
-def _command(folder, edition, trials, *extra):
+def _command(folder, edition, trials, *extra, quiet=True):
     return [sys.executable, "-m", "harness", "tune", "pendulum_case1", "--stop", "0.3", "--trials", str(trials),
-            "--edition", edition, "--out", str(folder), "--quiet", "--held-out", *extra]
+            "--edition", edition, "--out", str(folder), *(["--quiet"] if quiet else []), "--held-out", *extra]
 
 
 def _counts(database):
@@ -455,18 +455,193 @@ def test_trials_of_dead_processes_are_failed_and_retried_those_of_live_ones_kept
     assert sorted(t.system_attrs["failed_trial"] for t in retried) == sorted([trials["dead"], trials["none"]])
 
 
-def test_two_processes_drive_one_study_to_exactly_its_budget(tmp_path, edition, paths):
-    """Started together: one creates the study, the other loads it; together they stop at the budget."""
-    started = [subprocess.Popen(_command(tmp_path, edition, 12, "--jobs", "1", "--seed", str(seed)), cwd=ROOT,
-                                stderr=subprocess.PIPE, stdout=subprocess.DEVNULL) for seed in (0, 1)]
+@pytest.fixture(params=["sqlite", "postgresql"])
+def shared_database(request, tmp_path):
+    """The URL of an empty database that several tune processes share: an SQLite file, or a database of
+    the PostgreSQL server the tests start (tests/cluster_helpers.py)."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'shared.db'}"
+    server = request.getfixturevalue("postgres")
+    return server.url(server.create_database(f"tune_{os.getpid()}_{random.randrange(10 ** 9)}"))
+
+
+def finished_of(trials) -> list:
+    return [t for t in trials if t.state in (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)]
+
+
+def test_two_processes_drive_one_study_to_exactly_its_budget(tmp_path, edition, paths, shared_database):
+    """Started together, with different seeds on one study: one creates it, the other loads it; together
+    they stop at the budget, no trial lost or run twice."""
+    started = [subprocess.Popen(_command(tmp_path / f"out{seed}", edition, 12, "--jobs", "1", "--seed", str(seed),
+                                         "--storage", shared_database, "--study", "shared"),
+                                cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL) for seed in (0, 1)]
     for process in started:
-        assert process.wait(timeout=180) == 0, process.stderr.read().decode()
-    trials = trials_of(f"sqlite:///{tmp_path / 'pendulum_case1.db'}", "pendulum_case1-vud-ITAE")
+        assert process.wait(timeout=240) == 0, process.stderr.read().decode()
+    trials = trials_of(shared_database, "shared")
     owners = {t.user_attrs["owner"]["pid"] for t in trials}
     assert owners == {process.pid for process in started}
-    finished = [t for t in trials if t.state in (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)]
-    assert len(finished) == 12 and len({t.number for t in trials}) == len(trials)
+    assert len(finished_of(trials)) == 12 and len({t.number for t in trials}) == len(trials)
+    assert not [t for t in trials if t.state == optuna.trial.TrialState.RUNNING]
+    parameters = [tuple(sorted(t.params.items())) for t in finished_of(trials)]
+    assert len(set(parameters)) == len(parameters)  # no candidate run twice (the seeds differ)
     assert sum(bool(t.user_attrs.get("start")) for t in trials) == 1
+
+
+def kill_mid_trial(command: list, url: str, study: str, attempts: int = 4) -> None:
+    """Run ``command`` (a tune process) and SIGKILL it while a trial of ``study`` runs, after two have
+    finished; a kill that lands between two trials (they are short) is tried again with the same command."""
+    for _ in range(attempts):
+        process = subprocess.Popen(command, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
+                                   stderr=subprocess.PIPE)
+        deadline = time.monotonic() + 180
+        try:
+            while time.monotonic() < deadline:
+                time.sleep(0.05)
+                assert process.poll() is None, process.stderr.read().decode()
+                try:
+                    trials = trials_of(url, study)
+                except KeyError:  # the study is not there yet
+                    continue
+                if len(finished_of(trials)) >= 2 and any(t.state == optuna.trial.TrialState.RUNNING for t in trials):
+                    os.killpg(process.pid, signal.SIGKILL)
+                    break
+            else:
+                pytest.fail("the study did not get going")
+        finally:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+        if any(t.state == optuna.trial.TrialState.RUNNING for t in trials_of(url, study)):
+            return
+    pytest.fail(f"every one of {attempts} kills landed between two trials")
+
+
+def test_a_run_killed_mid_trial_is_resumed_by_another_through_its_heartbeat(tmp_path, edition, paths,
+                                                                              shared_database, monkeypatch):
+    """SIGKILL mid-trial; its running trial, owned by a process another host cannot see, is failed once its
+    heartbeat has been silent for the grace period and run again with the same parameters."""
+    command = _command(tmp_path, edition, 16, "--jobs", "1", "--storage", shared_database, "--study", "shared",
+                       "--stop", "5")  # trials long enough to be killed in one
+    kill_mid_trial(command, shared_database, "shared")
+    study = optuna.load_study(study_name="shared", storage=shared_database)
+    running = [t for t in study.get_trials() if t.state == optuna.trial.TrialState.RUNNING]
+    assert running, "killed between two trials"
+    finished = {t.number: t for t in finished_of(study.get_trials())}
+    for trial in running:  # as seen from another host: its process cannot be asked, only its heartbeat
+        study._storage.set_trial_user_attr(trial._trial_id, "owner", {"host": "another-host", "pid": 1})
+    monkeypatch.setattr(storage, "GRACE_S", 3)
+    monkeypatch.setattr(storage, "HEARTBEAT_S", 1)
+    monkeypatch.setattr(loop, "HEARTBEAT_S", 1)
+    summary = tune(config(tmp_path / "resumer", paths, edition, trials=16, stop=5, storage=shared_database,
+                          study="shared"), outputs=False)
+    after = {t.number: t for t in trials_of(shared_database, "shared")}
+    for number, trial in finished.items():  # kept as they were
+        assert after[number].state == trial.state and after[number].params == trial.params
+    for trial in running:  # failed, and run again with the same parameters as a new trial
+        assert after[trial.number].state == optuna.trial.TrialState.FAIL
+        retries = [t for t in after.values() if t.system_attrs.get("failed_trial") == trial.number]
+        assert len(retries) == 1 and retries[0].state.is_finished()
+        # the same parameters (a trial killed while it was being sampled holds only the first of them)
+        assert all(retries[0].params[name] == value for name, value in trial.params.items())
+    assert len(finished_of(after.values())) == 16 == summary["finished"]
+
+
+@pytest.mark.parametrize("problem", ["refused", "wrong password", "missing database", "missing driver"])
+def test_a_database_server_that_cannot_be_used_is_one_line_exit_2_before_any_trial(postgres, tmp_path, edition,
+                                                                                   capsys, monkeypatch, problem):
+    from tests.cluster_helpers import free_port
+
+    url = {"refused": postgres.url("postgres", port=free_port()),
+           "wrong password": postgres.url("postgres").replace(postgres.password, "not-the-password"),
+           "missing database": postgres.url("no_such_database"),
+           "missing driver": postgres.url("postgres")}[problem]
+    expected = {"refused": "Connection refused",
+                "wrong password": 'password authentication failed for user "afc" (the password comes from the URL, '
+                                  "PGPASSWORD or the password file",
+                "missing database": 'database "no_such_database" does not exist (create it first',
+                "missing driver": "the database driver psycopg is not installed: pip install -e '.[postgres]'"}[problem]
+    if problem == "missing driver":
+        monkeypatch.setitem(sys.modules, "psycopg", None)  # as if the postgres extra were not installed
+    status = cli_main(["tune", "pendulum_case1", "--trials", "3", "--jobs", "1", "--edition", edition, "--stop", "0.05",
+                       "--out", str(tmp_path), "--storage", url])
+    captured = capsys.readouterr()
+    assert status == 2, captured.err
+    assert captured.err.count("\n") == 1 and captured.err.startswith("error: --storage postgresql+psycopg://afc:***@"), \
+        captured.err
+    assert expected in captured.err, captured.err
+    assert "trial" not in captured.err and not list(tmp_path.iterdir())  # before any trial, nothing written
+    assert postgres.password not in captured.out + captured.err and "not-the-password" not in captured.err
+
+
+def test_the_password_reaches_no_terminal_log_or_file(postgres, tmp_path, edition, paths):
+    """With the password in the URL, and from a password file as libpq reads it (~/.pgpass, PGPASSFILE):
+    every output, every file written, masks or leaves it out."""
+    database = postgres.create_database(f"secret_{os.getpid()}")
+    password_file = tmp_path / "pgpass"
+    password_file.write_text(f"127.0.0.1:{postgres.port}:{database}:{postgres.user}:{postgres.password}\n")
+    password_file.chmod(0o600)
+    runs = [(postgres.url(database), {}),
+            (postgres.url(database, password=False), {"PGPASSFILE": str(password_file)})]
+    outputs = []
+    for index, (url, env) in enumerate(runs):
+        out = tmp_path / f"out{index}"
+        done = subprocess.run(_command(out, edition, 3 + index, "--jobs", "1", "--storage", url, quiet=False),
+                              cwd=ROOT, capture_output=True, text=True, timeout=240, env={**os.environ, **env})
+        text = done.stdout + done.stderr
+        assert done.returncode == 0, text
+        assert f"optuna-dashboard {postgres.url(database, password=False)}" in text
+        outputs.append(text)
+        for path in out.rglob("*"):
+            if path.is_file():
+                outputs.append(path.read_bytes().decode("latin-1"))
+        assert any(path.suffix == ".toml" for path in out.iterdir()) and (out / "report.md").exists()
+    assert "postgresql+psycopg://afc:***@127.0.0.1" in outputs[0]  # the first run names its database, masked
+    assert all(postgres.password not in text for text in outputs)
+    study = optuna.load_study(study_name="pendulum_case1-vud-ITAE", storage=postgres.url(database))
+    assert len(finished_of(study.get_trials())) == 4  # the second run resumed the first's study
+
+
+def test_another_seed_is_another_study_and_a_shared_study_says_whose_seed_it_samples(tmp_path, paths, edition):
+    first = tune(config(tmp_path, paths, edition, trials=2, stop=0.05), outputs=False)
+    again = tune(config(tmp_path, paths, edition, trials=3, stop=0.05, seed=999), outputs=False)
+    assert (first["study"], again["study"]) == ("pendulum_case1-vud-ITAE", "pendulum_case1-vud-ITAE-seed999")
+    assert again["finished"] == 3 and len(trials_of(first["storage"], first["study"])) == 2  # not resumed
+    lines = []
+    tune(config(tmp_path, paths, edition, trials=3, stop=0.05, seed=7, study="pendulum_case1-vud-ITAE"),
+         log=lines.append, outputs=False)
+    assert ("note: study 'pendulum_case1-vud-ITAE' was made with --seed 0; this process samples its trials with "
+            "--seed 7 (processes sharing a study should differ in seed)") in lines
+    assert len(trials_of(first["storage"], first["study"])) == 3
+
+
+def test_an_sqlite_file_on_a_network_file_system_is_refused():
+    mounts = "/dev/sda1 / ext4 rw 0 0\nserver:/export /shared nfs4 rw 0 0\ntmpfs /shared/tmp tmpfs rw 0 0\n"
+    assert storage.file_system_of(Path("/shared/studies/x.db"), mounts) == "nfs4"
+    assert storage.file_system_of(Path("/shared/tmp/x.db"), mounts) == "tmpfs"  # the longest mount point
+    assert storage.file_system_of(Path("/home/me/x.db"), mounts) == "ext4"
+    with pytest.raises(storage.TuneError, match=r"^--storage sqlite:////shared/studies/x.db: /shared/studies/x.db "
+                                                r"is on a network file system \(nfs4\); SQLite's locks"):
+        storage.refuse_shared_sqlite("sqlite:////shared/studies/x.db", mounts)
+    storage.refuse_shared_sqlite("sqlite:////shared/tmp/x.db", mounts)  # a local file system: fine
+    storage.refuse_shared_sqlite("postgresql+psycopg://u@h/db", mounts)  # a server: fine
+
+
+def test_a_full_disk_mid_study_is_one_line_naming_the_database_and_keeps_the_trials(tmp_path, edition, paths):
+    import resource
+
+    def small_files():  # a file size limit: a write beyond it fails as on a full disk (Python ignores SIGXFSZ)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (400 * 1024, 400 * 1024))
+
+    command = _command(tmp_path, edition, 200, "--jobs", "1", "--stop", "0.05")
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=240, preexec_fn=small_files)
+    database = tmp_path / "pendulum_case1.db"
+    assert done.returncode == 1, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: the study database {database} could not be written: "
+                                                   "OperationalError: "), done.stderr
+    assert "during the commit" not in lines[0] and "resume" in lines[0]
+    kept = finished_of(trials_of(f"sqlite:///{database}", "pendulum_case1-vud-ITAE"))
+    assert 0 < len(kept) < 200
 
 
 def test_the_docs_page_shows_the_declared_search_space_and_its_tune_commands_parse():

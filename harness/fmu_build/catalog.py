@@ -99,9 +99,3 @@ def selected_edition() -> str:
     return edition
 
 
-def ordinary_file_mode(path) -> None:
-    """Give a file made by mkstemp (private, 0600) the mode of an ordinary new file (0666 less the umask):
-    both builds write every FMU through a temporary file replaced in one step."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(path, 0o666 & ~umask)

@@ -54,13 +54,14 @@ from harness.fmu_build.native_stages import LAYER, ROOT, ls_ref
 from harness.fmu_build.native_stages.compiler import compile_binary
 from harness.fmu_build.native_stages.description import fmi2_description, fmi3_description, model_guid, pretty_xml
 from harness.fmu_build.native_stages.header import variables_header
-from harness.fmu_build.native_stages.package import atomic_write, fmu_files, zip_archive
+from harness.atomic_files import write_bytes as atomic_write
+from harness.fmu_build.native_stages.package import fmu_files, zip_archive
 from harness.fmu_build.native_stages.sources import add_source_files, source_files
 from harness.fmu_build.native_stages.targets import PLATFORMS, selected_targets
 from plants import registry as plant_registry
 
-__all__ = ["PLATFORMS", "NativeBuildError", "WORK_DIR", "build_model", "compiler_available", "ensure_built",
-           "fmu_paths", "main", "models"]
+__all__ = ["PLATFORMS", "NativeBuildError", "WORK_DIR", "build_model", "chosen_platforms", "compiler_available",
+           "ensure_built", "fmu_paths", "is_fresh", "main", "models", "stale_models"]
 STAGES = tuple(sorted((Path(__file__).parent / "native_stages").glob("*.py")))  # the build's own modules: inputs of every FMU
 
 
@@ -131,30 +132,53 @@ def _stamp(model: FmuSource, platforms) -> str:
     return digest.hexdigest()
 
 
-def ensure_built(platforms=None, force: bool = False, verbose: bool = False, jobs: int = 2) -> dict[str, dict[int, Path]]:
+def chosen_platforms(platforms=None) -> tuple:
+    """``platforms``, else $AFC_NATIVE_PLATFORMS (comma-separated), else all of PLATFORMS."""
+    if platforms is None:
+        chosen = os.environ.get("AFC_NATIVE_PLATFORMS", "")
+        platforms = tuple(p for p in chosen.split(",") if p) or PLATFORMS
+    return tuple(platforms)
+
+
+def _stamp_file(model: FmuSource) -> Path:
+    return WORK_DIR / "stamps" / f"{model.model_identifier}.stamp"
+
+
+def is_fresh(model: FmuSource, platforms=None) -> bool:
+    """Whether the model's FMUs exist and were built from its inputs as they are now for ``platforms``."""
+    platforms = chosen_platforms(platforms)
+    stamp_file = _stamp_file(model)
+    return (all(p.exists() for p in fmu_paths()[model.model_identifier].values()) and stamp_file.exists()
+            and stamp_file.read_text() == _stamp(model, platforms))
+
+
+def stale_models(platforms=None) -> list:
+    """The models ensure_built would build now."""
+    return [model for model in models() if not is_fresh(model, platforms)]
+
+
+def ensure_built(platforms=None, force: bool = False, verbose: bool = False, jobs: int = 2,
+                 announce=None) -> dict[str, dict[int, Path]]:
     """Build the native FMUs whose inputs changed; return {model identifier: {2: path, 3: path}}.
 
-    ``platforms`` defaults to $AFC_NATIVE_PLATFORMS (comma-separated) or all of PLATFORMS.
+    ``platforms`` defaults to $AFC_NATIVE_PLATFORMS (comma-separated) or all of PLATFORMS; ``announce(model,
+    targets)``, if given, is called before a model is built (targets: the zig target names).
     """
     if not compiler_available():
         raise NativeBuildError("the native edition needs zig's C compiler: pip install ziglang "
                                "(or pip install -e '.[native]')")
-    if platforms is None:
-        chosen = os.environ.get("AFC_NATIVE_PLATFORMS", "")
-        platforms = tuple(p for p in chosen.split(",") if p) or PLATFORMS
-    platforms = tuple(platforms)
+    platforms = chosen_platforms(platforms)
     zig_version = None
     result = {}
     for model in models():
         paths = fmu_paths()[model.model_identifier]
-        stamp_file = WORK_DIR / "stamps" / f"{model.model_identifier}.stamp"
         stamp = _stamp(model, platforms)
-        fresh = (not force and all(p.exists() for p in paths.values()) and stamp_file.exists()
-                 and stamp_file.read_text() == stamp)
-        if not fresh:
+        if force or not is_fresh(model, platforms):
             zig_version = zig_version or c_toolchain.zig_version()
+            if announce is not None:
+                announce(model, [t.zig for t in selected_targets(platforms)])
             build_model(model, platforms, jobs=jobs, zig_version=zig_version, verbose=verbose)
-            atomic_write(stamp_file, stamp.encode())
+            atomic_write(_stamp_file(model), stamp.encode())
         elif verbose:
             print(f"native: {model.model_identifier}: up to date", file=sys.stderr, flush=True)
         result[model.model_identifier] = paths

@@ -56,12 +56,9 @@ Ecos (ecospy 0.7)
 """
 from __future__ import annotations
 
-import contextlib
 import ctypes
 import functools
 import importlib.metadata
-import os
-import shutil
 import sys
 import tempfile
 import time as clock
@@ -78,6 +75,7 @@ from harness.fmu_build import builder as build_fmu
 
 from .. import cli_args, variants
 from .. import scenario as scenarios
+from .. import atomic_files, unpack
 from ..cases import parallel_map
 from ..master import simulate
 from ..scores import control_energy, iae, itae, score
@@ -111,10 +109,10 @@ class EngineResult:
 
     def write_csv(self, path) -> Path:
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         header = ",".join(f'"{name}"' for name in ["time", *self.columns])
-        np.savetxt(path, np.column_stack([self.time, self.values]), delimiter=",", header=header, comments="",
-                   fmt="%.17g")
+        with atomic_files.replacing(path, "w", newline="") as stream:
+            np.savetxt(stream, np.column_stack([self.time, self.values]), delimiter=",", header=header, comments="",
+                       fmt="%.17g")
         return path
 
 
@@ -139,39 +137,72 @@ class Package:
         return [f"{i}.{n}" for i, c in self.components.items() for n, kind in c["connectors"] if kind == "input"]
 
 
+class PackageError(cli_args.UsageError):
+    """An SSP package that cannot be read: the message names the file, the entry and what is wrong."""
+
+
+def _xml(package: zipfile.ZipFile, path: Path, entry: str):
+    """The root element of the XML file ``entry`` of the package, or a PackageError naming both."""
+    try:
+        text = package.read(entry)
+    except KeyError:
+        raise PackageError(f"{path}: the package has no {entry}") from None
+    try:
+        return ElementTree.fromstring(text)
+    except ElementTree.ParseError as error:
+        raise PackageError(f"{path}: {entry} is not well-formed XML: {error}") from None
+
+
 def read_package(path) -> Package:
-    """Read SystemStructure.ssd and the .ssv files it binds (stdlib XML: no engine involved)."""
+    """Read SystemStructure.ssd and the .ssv files it binds (stdlib XML: no engine involved); the archive and
+    the FMUs in it are checked first (sizes, links, paths: harness/unpack.py)."""
     path = Path(path)
     ns = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues"}
+    unpack.check_archive(path, nested=(".fmu",))
     with zipfile.ZipFile(path) as package:
-        root = ElementTree.fromstring(package.read("SystemStructure.ssd"))
+        root = _xml(package, path, "SystemStructure.ssd")
         system = root.find("ssd:System", ns)
+        if system is None:
+            found = root.tag.split("}")[-1]
+            raise PackageError(f"{path}: SystemStructure.ssd has no <System> in the SSP 1.0 namespace {SSD_NS} "
+                               f"(its root is <{found}>); an SSP package describes one system")
         components, parameter_set = {}, None
         for element in system.findall("ssd:Elements/ssd:Component", ns):
             connectors = [(c.get("name"), c.get("kind")) for c in element.findall("ssd:Connectors/ssd:Connector", ns)]
             parameters = {}
             for binding in element.findall("ssd:ParameterBindings/ssd:ParameterBinding", ns):
                 if binding.get("source"):
-                    parameter_root = ElementTree.fromstring(package.read(binding.get("source")))
+                    parameter_root = _xml(package, path, binding.get("source"))
                 else:
                     parameter_root = binding.find("ssd:ParameterValues/ssv:ParameterSet", ns)
+                if parameter_root is None:
+                    raise PackageError(f"{path}: component {element.get('name')!r} has a ParameterBinding with "
+                                       "neither a source nor a ParameterSet")
                 parameter_set = parameter_root.get("name")
                 for parameter in parameter_root.findall("ssv:Parameters/ssv:Parameter", ns):
                     value = list(parameter)[0]
                     parameters[parameter.get("name")] = (value.tag.split("}")[1], value.get("value"))
-            components[element.get("name")] = {"source": element.get("source"), "connectors": connectors,
-                                               "parameters": parameters}
+            source = element.get("source")
+            if not source or source not in package.namelist():
+                raise PackageError(f"{path}: component {element.get('name')!r} names the source {source!r}, which "
+                                   "the package does not hold")
+            components[element.get("name")] = {"source": source, "connectors": connectors, "parameters": parameters}
+        if not components:
+            raise PackageError(f"{path}: SystemStructure.ssd's system has no component")
         connections = [(f"{c.get('startElement')}.{c.get('startConnector')}",
                         f"{c.get('endElement')}.{c.get('endConnector')}")
                        for c in system.findall("ssd:Connections/ssd:Connection", ns)]
         experiment = root.find("ssd:DefaultExperiment", ns)
         start, stop, step = 0.0, None, None
-        if experiment is not None:
-            start = float(experiment.get("startTime", 0.0))
-            stop = float(experiment.get("stopTime")) if experiment.get("stopTime") else None
-            ours = experiment.find(f"ssd:Annotations/ssc:Annotation/{{{AFC_NS}}}Experiment", ns)
-            if ours is not None and ours.get("stepSize"):
-                step = float(ours.get("stepSize"))
+        try:
+            if experiment is not None:
+                start = float(experiment.get("startTime", 0.0))
+                stop = float(experiment.get("stopTime")) if experiment.get("stopTime") else None
+                ours = experiment.find(f"ssd:Annotations/ssc:Annotation/{{{AFC_NS}}}Experiment", ns)
+                if ours is not None and ours.get("stepSize"):
+                    step = float(ours.get("stepSize"))
+        except ValueError as error:
+            raise PackageError(f"{path}: SystemStructure.ssd's DefaultExperiment: {error}") from None
     return Package(path, components, connections, start, stop, step, parameter_set)
 
 
@@ -203,7 +234,10 @@ def run_fmpy_ssp(ssp_path, stop: float | None = None, step: float | None = None,
                         parameter_set.parameters.append(Parameter(name=f"{component.name}.{p.name}", type=p.type,
                                                                   value=p.value))
     wall = clock.perf_counter()
-    table = simulate_ssp(str(ssp_path), start_time=start, stop_time=stop, step_size=step, parameter_set=parameter_set)
+    # fmpy unpacks the package and each FMU into folders of its own and removes none of them when a run fails
+    with unpack.private_temporary_folder("fmpy-ssp"):
+        table = simulate_ssp(str(ssp_path), start_time=start, stop_time=stop, step_size=step,
+                             parameter_set=parameter_set)
     wall = clock.perf_counter() - wall
     columns = [name for name in table.dtype.names[1:] if name in package.outputs]
     raw_time = np.asarray(table["time"], dtype=float)
@@ -251,7 +285,6 @@ def import_ecospy():
     return ecospy
 
 
-@contextlib.contextmanager
 def ecos_temp_dir():
     """A private temporary folder for one Ecos run, removed afterwards with all it holds.
 
@@ -260,17 +293,7 @@ def ecos_temp_dir():
     at a folder of our own while the simulation lives; then it is restored and the
     folder removed, so nothing is left and no other process's folders are touched.
     """
-    folder = tempfile.mkdtemp(prefix="afc_ecos_")
-    previous = os.environ.get("TMPDIR")
-    os.environ["TMPDIR"] = folder
-    try:
-        yield folder
-    finally:
-        if previous is None:
-            os.environ.pop("TMPDIR", None)
-        else:
-            os.environ["TMPDIR"] = previous
-        shutil.rmtree(folder, ignore_errors=True)
+    return unpack.private_temporary_folder("ecos")
 
 
 def run_ecos(ssp_path, stop: float | None = None, step: float | None = None, variables=None,
@@ -280,8 +303,8 @@ def run_ecos(ssp_path, stop: float | None = None, step: float | None = None, var
     ``parameter_set="package"`` applies the package's own parameter set
     (``initialValues``); ``None`` applies none, as ``sim.init()`` does.
     """
+    package = read_package(ssp_path)  # the package checked before Ecos is loaded
     ecospy = import_ecospy()
-    package = read_package(ssp_path)
     start, stop, step, steps = _experiment(package, stop, step)
     columns = list(variables or package.outputs + package.inputs)
     identifiers = [name.replace(".", "::", 1) for name in columns]

@@ -24,13 +24,12 @@ from __future__ import annotations
 import json
 import re
 import shutil
-import tempfile
-import zipfile
 from pathlib import Path
 
 import numpy as np
 from fmpy import simulate_fmu
 
+from .. import unpack
 from ..fmi import ModelInfo
 from ..master import Master, resolve_fmu
 from ..me_master import ModelExchangeMaster
@@ -82,8 +81,10 @@ def run_omsimulator(scenario, fmu_paths, package: Path, api: str = "python") -> 
             time, columns = omsimulator.run_python_api(package, scenario.stop, names, output_step=scenario.step)
         else:
             time, columns = omsimulator.run_python_api(package, scenario.stop, names, fixed_step=scenario.step)
-    # its own complaint that it lacks the SSP schema files of its install is not an FMU's warning
-    warnings = [w for w in console_warnings(lines) if "could not load the ssd schema file" not in w]
+    # its own complaint that it lacks the SSP schema files of its install, and its count of what it logged
+    # ("info:    2 warnings"), are not an FMU's warnings
+    warnings = [w for w in console_warnings(lines) if "could not load the ssd schema file" not in w
+                and not re.fullmatch(r"info:\s+\d+ warnings", w)]
     return Trajectory(time, *(columns[n] for n in names)), warnings, "console (OMSimulator prints the FMUs' messages)"
 
 
@@ -142,16 +143,15 @@ def run_libcosim_ssp(scenario, fmu_paths, package: Path) -> tuple:
     _, infos = _infos(scenario, fmu_paths)
     with captured_console() as lines:
         _libcosim_logging()
-        folder = Path(tempfile.mkdtemp(prefix="afc_libcosim_"))
+        folder = unpack.unpack_folder("libcosim")
         try:
-            with zipfile.ZipFile(package) as archive:
-                archive.extractall(folder)
+            unpack.extract_archive(package, folder)
             execution = CosimExecution.from_ssp_file(str(folder))
             indices = {name: execution.slave_index_from_instance_name(name) for name in scenario.components}
             trajectory = _libcosim_trajectory(execution, indices, infos, scenario)
             del execution
         finally:
-            shutil.rmtree(folder, ignore_errors=True)
+            unpack.remove_folder(folder)
     return trajectory, console_warnings(lines), "console (libcosim log level warning)"
 
 
@@ -202,7 +202,7 @@ def run_container(scenario, fmu_paths, package=None, mode: str = "parallel") -> 
     paths, infos = _infos(scenario, fmu_paths)
     fmu_files = {name: f"{infos[name].model_identifier}.fmu" for name in scenario.components}
     order = tuple(reversed(COMPONENT_ORDER)) if mode == "seq-reverse" else COMPONENT_ORDER
-    folder = Path(tempfile.mkdtemp(prefix="afc_container_"))
+    folder = unpack.unpack_folder("container")
     messages = []
     try:
         for name in scenario.components:
@@ -223,7 +223,7 @@ def run_container(scenario, fmu_paths, package=None, mode: str = "parallel") -> 
                               step_size=scenario.step, output_interval=scenario.step, output=names, logger=logger,
                               debug_logging=True)
     finally:
-        shutil.rmtree(folder, ignore_errors=True)
+        unpack.remove_folder(folder)
     time = np.asarray(result["time"], dtype=float)
     columns = [np.asarray(result[n], dtype=float) for n in names]
     # the container forwards the embedded FMUs' messages as "<FMU file>: ..."; its own banners (status Warning:

@@ -25,14 +25,13 @@ import json
 import math
 import shutil
 import sys
-import tempfile
 import time as clock
 from pathlib import Path
 
 from harness.fmu_build import builder as build_fmu
 from harness.fmu_build import native as build_native
 
-from .. import cli_args, variants
+from .. import atomic_files, cli_args, unpack, variants
 from .. import scenario as scenarios
 from ..cases import parallel_map
 from ..studies.step_study import load_convergence, validated_step
@@ -77,7 +76,7 @@ def hosts_matrix(names, controllers=(variants.PROPOSED,), host_keys=None, step_k
     """The rows of the matrix; ``stop``: one horizon for every scenario, or {scenario: horizon} (None: 20 s)."""
     stops = stop if isinstance(stop, dict) else {name: stop for name in names}
     convergence = load_convergence() if convergence is None else convergence
-    folder = Path(tempfile.mkdtemp(prefix="afc_hosts_"))  # SSP packages and a private copy of the FMUs
+    folder = unpack.unpack_folder("hosts")  # SSP packages and a private copy of the FMUs
     fmu_paths = {name: Path(shutil.copy(path, folder / path.name)) for name, path in build_fmu.ensure_built().items()}
     host_keys = list(host_keys or HOSTS_BY_KEY)
     native_paths = None
@@ -116,7 +115,7 @@ def hosts_matrix(names, controllers=(variants.PROPOSED,), host_keys=None, step_k
         tasks.sort(key=lambda t: t[3])  # the finest steps (longest runs) first
         rows = parallel_map(host_row, tasks, jobs, description="host matrix", progress=None)
     finally:
-        shutil.rmtree(folder, ignore_errors=True)
+        unpack.remove_folder(folder)
     order = {key: i for i, key in enumerate(HOSTS_BY_KEY)}
     rows.sort(key=lambda r: (names.index(r["scenario"]), r["controller"], order[r["host"]], r["step"]))
     return {"rows": rows, "skipped": skipped, "wall_s": clock.perf_counter() - began, "stops": stops,
@@ -153,12 +152,12 @@ def hosts_command(args) -> int:
                               {name: stops.get(name) for name in names}, args.jobs)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "hosts.json").write_text(json.dumps(matrix, indent=1))
+    atomic_files.write_text(out / "hosts.json", json.dumps(matrix, indent=1))
     text = matrix_markdown(matrix)
-    (out / "hosts.md").write_text(text)
+    atomic_files.write_text(out / "hosts.md", text)
     written = [out / "hosts.json", out / "hosts.md"]
     if args.apply:
-        HOSTS_MD.write_text(text)
+        atomic_files.write_text(HOSTS_MD, text)
         written.append(HOSTS_MD)
     for row in matrix["rows"]:
         error = row.get("error")

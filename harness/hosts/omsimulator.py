@@ -26,11 +26,11 @@ import contextlib
 import csv
 import ctypes
 import importlib.util
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from .. import unpack
 
 MODULE = "OMSimulator"
 
@@ -45,15 +45,27 @@ def unavailable() -> str | None:
 
 @contextlib.contextmanager
 def private_temp_dir():
-    """A temporary folder that OMSimulator's folders also go into (``tempfile.tempdir``), removed afterwards."""
-    folder = tempfile.mkdtemp(prefix="afc_oms_")
-    previous = tempfile.tempdir
-    tempfile.tempdir = folder
-    try:
-        yield Path(folder)
-    finally:
-        tempfile.tempdir = previous
-        shutil.rmtree(folder, ignore_errors=True)
+    """A temporary folder that OMSimulator's folders also go into (``tempfile.tempdir``), removed afterwards;
+    OMSimulator's count of warnings and errors is printed before it is (:func:`flush_log_counts`)."""
+    with unpack.private_temporary_folder("oms") as folder:
+        try:
+            yield Path(folder)
+        finally:
+            flush_log_counts(Path(folder))
+
+
+def flush_log_counts(folder: Path) -> None:
+    """Have OMSimulator print its count of logged warnings and errors now, and start counting from 0.
+
+    It prints the count ("info:    0 warnings", "info:    1 errors") when its log target changes, and
+    at process exit when the count is not 0: after the caller (a test session, a command) has printed its
+    last line.  Switching the log to a file of ``folder`` and back to the console prints it here, where
+    the caller captures the console."""
+    from OMSimulator.capi import Capi  # optional: see unavailable(); loaded by the run this follows
+
+    library = Capi.obj
+    library.oms_setLogFile(str(folder / "omsimulator.log").encode())
+    library.oms_setLogFile(b"")
 
 
 def read_result(path: Path, names: list) -> tuple:

@@ -52,7 +52,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 from harness.fmu_build import builder as build_fmu
 
-from .. import cli_args, variants
+from .. import atomic_files, cli_args, variants
 from .. import scenario as scenarios
 from ..fmi import ModelInfo
 from ..master import simulate
@@ -211,8 +211,8 @@ def export_ssp(scenario: Scenario, out, fmu_paths: dict | None = None, start_inp
     variant = scenario.components[scenario.controller_instance].parameters.get("variant")
     controller = variants.name_of(variant)
     name = f"{scenario.name}_{controller}"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with zipfile.ZipFile(out, "w", compression=zipfile.ZIP_DEFLATED) as package:
+    with atomic_files.replacing(out, "wb") as stream, \
+            zipfile.ZipFile(stream, "w", compression=zipfile.ZIP_DEFLATED) as package:  # whole or not at all
         package.writestr("SystemStructure.ssd", system_structure(scenario, infos, sources, name, rtol))
         for instance in scenario.components:
             description = f"{scenario.name}: parameters of {instance}"

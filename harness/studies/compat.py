@@ -49,7 +49,7 @@ from harness.fmu_build import native as build_native
 from harness.fmu_build import catalog as fmu_catalog
 from harness.fmu_build.native_stages import ls_ref
 
-from .. import cli_args
+from .. import atomic_files, cli_args
 from .. import scenario as scenarios
 from ..cases import default_jobs
 from ..fmi import Component, ModelInfo
@@ -238,7 +238,7 @@ def held(table: np.ndarray) -> np.ndarray:
 
 def write_csv(path: Path, names, table: np.ndarray):
     """A cross-check CSV: quoted names, time first, numbers as the shortest text that reads back exactly."""
-    Path(path).write_bytes(ls_ref.csv_text(names, table))
+    atomic_files.write_bytes(path, ls_ref.csv_text(names, table))
 
 
 # ------------------------------------------------------------------ entries
@@ -342,8 +342,8 @@ def write_entry(entry: Entry, out: Path) -> Path:
     # the reference: the FMU replays exactly the inputs written (read back from the file)
     reference = replay(entry.fmu, e, table, "current" if entry.interface == "me" else "previous")
     write_csv(folder / f"{e.model}_ref.csv", ["time", *e.outputs], reference)
-    (folder / f"{e.model}_ref.opt").write_text(_opt_text(entry))
-    (folder / "README.md").write_text(readme(entry, len(reference)))
+    atomic_files.write_text(folder / f"{e.model}_ref.opt", _opt_text(entry))
+    atomic_files.write_text(folder / "README.md", readme(entry, len(reference)))
     entry.folder = folder
     return folder
 
@@ -405,7 +405,7 @@ def judge(entry: Entry) -> Entry:
             if worst > CS_AGREEMENT:
                 entry.problem = f"co-simulation result differs from the reference by {worst:.3g} of a signal's range"
     entry.passed = not entry.problem
-    (folder / ("passed" if entry.passed else "failed")).write_text("")
+    atomic_files.write_text(folder / ("passed" if entry.passed else "failed"), "")
     lines = [f"# {e.model} ({entry.tool} {tool_version()}) imported by {IMPORTER} "
              f"{importlib.metadata.version('fmpy')}", "",
              f"Result: **{'passed' if entry.passed else 'failed'}**" + (f": {entry.problem}" if entry.problem else ""),
@@ -413,7 +413,7 @@ def judge(entry: Entry) -> Entry:
              resimulation_command(entry, Path("."), Path(f"{e.model}_out.csv"), relative=True), "```", "",
              f"Largest |out - ref| over each signal's range (fmpy ran {entry.fmpy_wall_s:.1f} s):", ""]
     lines += [f"- {name}: {value:.3g}" for name, value in entry.agreement.items()]
-    (folder / "README.md").write_text("\n".join(lines) + "\n")
+    atomic_files.write_text(folder / "README.md", "\n".join(lines) + "\n")
     return entry
 
 
@@ -504,7 +504,7 @@ def compat(out: Path, editions=EDITIONS, models=None, jobs: int | None = None) -
                             "max_relative_deviation": max(entry.agreement.values(), default=None)}
                            for entry in entries],
                "validation": dataclasses.asdict(validation)}
-    (out / "compat.json").write_text(json.dumps(summary, indent=2) + "\n")
+    atomic_files.write_text(out / "compat.json", json.dumps(summary, indent=2) + "\n")
     return CompatOutcome(entries, validation)
 
 

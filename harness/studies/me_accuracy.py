@@ -34,7 +34,7 @@ import numpy as np
 
 from harness.fmu_build import builder as build_fmu
 
-from .. import cli_args, me_master, variants
+from .. import atomic_files, cli_args, me_master, variants
 from .. import scenario as scenarios
 from ..cases import Case, default_jobs, run_cases
 from ..master import simulate
@@ -315,9 +315,9 @@ def me_accuracy_command(args) -> int:
                             () if args.scenarios else BEYOND)
         study = accuracy_study(cases, tuple(args.rtols), args.compare_rtol, args.stop, args.jobs)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "me_accuracy.json").write_text(json.dumps(study, indent=1))
+    atomic_files.write_text(out / "me_accuracy.json", json.dumps(study, indent=1))
     text = markdown(study)
-    (out / "me_accuracy.md").write_text(text)
+    atomic_files.write_text(out / "me_accuracy.md", text)
     written = [out / "me_accuracy.json", out / "me_accuracy.md"]
     for row in study["rows"]:
         run = run_at(row, study["compare_rtol"])
@@ -330,7 +330,7 @@ def me_accuracy_command(args) -> int:
         if study.get("stop") is not None:
             print("error: --apply needs the full horizon (no --stop)", file=sys.stderr)
             return 1
-        DOCS_PAGE.write_text(text)
+        atomic_files.write_text(DOCS_PAGE, text)
         written.append(DOCS_PAGE)
     print(f"study wall time {study['wall_s']:.1f} s; written: " + ", ".join(str(p) for p in written))
     return 0

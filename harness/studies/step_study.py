@@ -57,7 +57,7 @@ from pathlib import Path
 
 from harness.fmu_build import builder as build_fmu
 
-from .. import cli_args, variants
+from .. import atomic_files, cli_args, variants
 from .. import scenario as scenarios
 from ..cases import default_jobs, parallel_map
 from ..master import Divergence, SimulationFailed, simulate
@@ -445,7 +445,7 @@ def apply_step(name: str, step: float):
                           "(docs/convergence.md)", text, count=1)
     if count != 1:
         raise RuntimeError(f"no 'step = ... # comment' line in {path}")
-    path.write_text(text)
+    atomic_files.write_text(path, text)
 
 
 def convergence_command(args) -> int:
@@ -478,16 +478,16 @@ def convergence_command(args) -> int:
     print(f"study wall time {convergence['wall_s']:.1f} s on {jobs} processes")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "convergence.json").write_text(json.dumps(convergence, indent=1))
-    (out / "convergence.md").write_text(convergence_markdown(convergence))
+    atomic_files.write_text(out / "convergence.json", json.dumps(convergence, indent=1))
+    atomic_files.write_text(out / "convergence.md", convergence_markdown(convergence))
     written = [out / "convergence.json", out / "convergence.md"]
     if args.apply:
         if stop is not None or set(controllers) != set(CONTROLLERS):
             print("error: --apply needs the full study (no --stop, no --quick)", file=sys.stderr)
             return 2
         committed = merged_study(load_convergence(), convergence)
-        CONVERGENCE_JSON.write_text(json.dumps(committed, indent=1))
-        CONVERGENCE_MD.write_text(convergence_markdown(committed))
+        atomic_files.write_text(CONVERGENCE_JSON, json.dumps(committed, indent=1))
+        atomic_files.write_text(CONVERGENCE_MD, convergence_markdown(committed))
         written += [CONVERGENCE_JSON, CONVERGENCE_MD]
         for name, entry in convergence["scenarios"].items():
             changed = scenarios.load(name).step != entry["chosen_step"]

@@ -13,14 +13,13 @@ from __future__ import annotations
 
 import csv
 import math
-import shutil
 import sys
 import time as clock
 from pathlib import Path
 
 import numpy as np
 
-from .. import cli_args, variants
+from .. import atomic_files, cli_args, variants
 from .. import scenario as scenarios
 from ..cases import Case, default_jobs, run_cases
 from ..me_master import ALGORITHM as MODEL_EXCHANGE
@@ -46,7 +45,7 @@ BEYOND_PAPER_SETS = (2, 3)  # fuzzy sets per input: M = 8 and 27 rules at order 
 
 # ------------------------------------------------------------------ tables
 def write_table(path: Path, rows: list, columns=TABLE_COLUMNS):
-    with open(path, "w", newline="") as stream:
+    with atomic_files.replacing(path, "w", newline="") as stream:
         writer = csv.DictWriter(stream, fieldnames=columns, extrasaction="ignore")
         writer.writeheader()
         for row in rows:
@@ -123,6 +122,18 @@ def table_block(rows: list, scenario: str) -> list:
                                                                          if table_notes(own) else []), ""]
 
 
+def table_cases(stop=None, algorithm: str = "feedthrough", rtol: float | None = None) -> list:
+    """The cases of Tables I and II: every scenario of the paper with every controller."""
+    return [Case(name, controller, stop=stop, figure_interval=0.01, algorithm=algorithm, rtol=rtol)
+            for name in ALL_SCENARIOS for controller in CONTROLLERS]
+
+
+def pool_counts() -> tuple:
+    """(cases of Tables I/II, runs in the first pool, of them the third-order plant's): what ``--help`` says."""
+    cases, extra = table_cases(), beyond_paper_cases()
+    return len(cases), 2 * len(cases) + len(extra), len(extra)
+
+
 def beyond_paper_cases(stop=None, algorithm: str = "feedthrough", rtol: float | None = None) -> list:
     """The extra runs: the third-order plant with every controller at m = 2 and 3 sets per input."""
     return [Case(BEYOND_PAPER, controller, stop=stop, overrides=(("controller.sets", sets),), algorithm=algorithm,
@@ -161,7 +172,7 @@ def figures(rows: list, out: Path) -> list:
             continue
         fig = draw_figure(name, runs, plt)
         path = out / f"{name}.png"
-        fig.savefig(path, dpi=90)
+        atomic_files.save_figure(fig, path, dpi=90)
         plt.close(fig)
         paths.append(path)
     return paths
@@ -427,8 +438,7 @@ def tables_command(args) -> int:
     if not me and args.rtol is not None:
         raise cli_args.UsageError("--rtol is the tolerance of --algorithm me; co-simulation has a step")
     rtol = (args.rtol or DEFAULT_RTOL) if me else None
-    cases = [Case(name, controller, stop=args.stop, figure_interval=0.01, algorithm=args.algorithm, rtol=rtol)
-             for name in ALL_SCENARIOS for controller in CONTROLLERS]
+    cases = table_cases(args.stop, args.algorithm, rtol)
     # every case at h (the tables) and at h/2 (the claims' error estimates) in one pool,
     # the longest runs first, so both cores finish together
     extra = beyond_paper_cases(args.stop, args.algorithm, rtol)  # the third-order plant, beyond the paper (no claims)
@@ -461,7 +471,7 @@ def tables_command(args) -> int:
     write_table(out / "table3_beyond_paper.csv", beyond_rows,
                 ("scenario", "controller", "sets", *TABLE_COLUMNS[2:-2], "status"))
     figure_paths = figures(rows, out)
-    (out / "report.md").write_text(report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib,
+    atomic_files.write_text(out / "report.md", report_markdown(rows, claims, convergence, figure_paths, wall_s, jobs, peak_mib,
                                                    beyond_rows, rtol))
     print(run_summary(len(cases), len(everything), len(extra), len(refined), ladder_s, wall_s, jobs, peak_mib,
                       None if me else communication_steps([*(o for ladder in ladders.values() for o in ladder),
@@ -491,14 +501,17 @@ def tables_command(args) -> int:
                   "(no --stop, no failed run)", file=sys.stderr)
             return 1
         target = DOCS_DIR / README_FIGURE
-        shutil.copyfile(out / README_FIGURE, target)
+        atomic_files.write_bytes(target, (out / README_FIGURE).read_bytes())
         print(f"applied: {target} (the README's figure) from {out / README_FIGURE}")
     return 1 if failed else 0
 
 
 def register(commands):
-    tables = commands.add_parser("tables", help="run Table I/II (12 co-simulations) and the third-order "
-                                                "plant beyond the paper (6) and write the report")
+    paper, pooled, beyond = pool_counts()
+    tables = commands.add_parser("tables", help=f"run Table I/II and write the report: {pooled} co-simulations "
+                                                f"in one pool (the {paper} cases at their step and at half of it, "
+                                                f"{beyond} of the third-order plant beyond the paper), then finer "
+                                                "ones for the claims left open (--refine)")
     tables.add_argument("--out", default="results", help="output folder (default results/, ignored by git)")
     tables.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
     tables.add_argument("--stop", type=cli_args.positive_float,

@@ -30,7 +30,7 @@ from pathlib import Path
 
 from harness.fmu_build import builder as build_fmu
 
-from .. import cli_args, variants
+from .. import atomic_files, cli_args, variants
 from .. import scenario as scenarios
 from ..cases import simulate_any
 from ..master import SimulationFailed
@@ -159,7 +159,7 @@ def figure(study: dict, path: Path) -> Path:
         axis.grid(alpha=0.3, which="both")
     axes[0][0].legend(fontsize=7, loc="lower left")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    atomic_files.save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 
@@ -213,10 +213,10 @@ def work_precision_command(args) -> int:
     else:
         study = work_precision(tuple(args.scenarios or LADDERS), args.stop, args.repeat)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "work_precision.json").write_text(json.dumps(study, indent=1))
+    atomic_files.write_text(out / "work_precision.json", json.dumps(study, indent=1))
     figure(study, out / "work_precision.png")
     text = markdown(study, "work_precision.png")
-    (out / "work_precision.md").write_text(text)
+    atomic_files.write_text(out / "work_precision.md", text)
     written = [out / "work_precision.json", out / "work_precision.md", out / "work_precision.png"]
     for name, verdict in verdicts(study).items():
         print(f"{name}: at {100 * study['target']:g} %: " + "; ".join(
@@ -225,7 +225,7 @@ def work_precision_command(args) -> int:
         if study.get("stop") is not None:
             print("error: --apply needs the full horizon (no --stop)", file=sys.stderr)
             return 1
-        DOCS_PAGE.write_text(text)
+        atomic_files.write_text(DOCS_PAGE, text)
         figure(study, DOCS_FIGURE)
         written += [DOCS_PAGE, DOCS_FIGURE]
     print("written: " + ", ".join(str(p) for p in written))

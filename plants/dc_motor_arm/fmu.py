@@ -24,6 +24,7 @@ from fmu_src.afc_slave_base import INPUT, OUTPUT, Variable, finite, non_negative
 from plants.rk4_plant_slave import RK4PlantSlave as Fmi2Slave
 from plants.dc_motor_arm import model
 
+KIND = "plant"  # plants/registry.py: the shared RK4 files this FMU carries
 VARIABLES = (
     positive("J", 0.5, "kg.m2", "inertia at the motor shaft (motor and arm)"),
     non_negative("b", 0.2, "N.m.s/rad", "viscous friction"),

@@ -25,6 +25,7 @@ from fmu_src.afc_slave_base import INPUT, OUTPUT, Variable, finite, positive
 from plants.rk4_plant_slave import RK4PlantSlave as Fmi2Slave
 from plants.inverted_pendulum import model
 
+KIND = "plant"  # plants/registry.py: the shared RK4 files this FMU carries
 VARIABLES = (
     positive("gv", 9.8, "m/s2", "gravitational acceleration"),
     positive("mc", 1.0, "kg", "cart mass"),

@@ -28,6 +28,7 @@ from fmu_src.afc_slave_base import INPUT, OUTPUT, Variable, finite, non_negative
 from plants.rk4_plant_slave import RK4PlantSlave as Fmi2Slave
 from plants.manipulator import model
 
+KIND = "plant"  # plants/registry.py: the shared RK4 files this FMU carries
 VARIABLES = (
     positive("gv", 9.8, "m/s2", "gravitational acceleration"),
     positive("lr", 0.25, "m", "link length"),

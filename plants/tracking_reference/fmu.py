@@ -26,6 +26,7 @@ from fmu_src.afc_declaration import ModelExchange, TestDrive
 from fmu_src.afc_slave_base import INPUT, OUTPUT, Variable, finite, positive
 from fmu_src.afc_slave_base import TableSlave as Fmi2Slave
 
+KIND = "reference"  # plants/registry.py: no state, no shared files
 _sin = math.sin
 _cos = math.cos
 

@@ -57,6 +57,7 @@ def variables_header(model_identifier: str, guid: str) -> str:
               f"#define N_STATES {len(declaration.states)}",
               f"#define N_EVENT_INDICATORS {len(declaration.event_indicators)}",
               f"#define N_LOCALS {len(declaration.locals)}",
+              f"#define MODEL_TIME_EVENTS {int(declaration.time_events)}",
               f"#define VR_FIRST_DERIVATIVE {len(variables) + 1}",
               "#define VR_FIRST_EVENT_INDICATOR (VR_FIRST_DERIVATIVE + N_STATES)",
               "#define VR_FIRST_LOCAL (VR_FIRST_EVENT_INDICATOR + N_EVENT_INDICATORS)",

@@ -25,6 +25,7 @@ from fmpy import platform_tuple as FMPY_PLATFORM_TUPLE
 from fmpy import simulate_fmu
 from fmpy.util import read_csv
 
+from harness import atomic_files
 from harness.fmu_build.native_stages import ROOT
 from harness.fmu_build.native_stages.description import pretty_xml
 
@@ -98,9 +99,10 @@ def write(experiments: list[Experiment]) -> None:
     """Store the experiments (experiments.json and each stimuli file)."""
     EXPERIMENTS.mkdir(parents=True, exist_ok=True)
     for experiment in experiments:
-        (EXPERIMENTS / stimuli_name(experiment.model)).write_bytes(experiment.stimuli)
-    EXPERIMENTS_FILE.write_text(json.dumps({e.model: e.as_json() for e in sorted(experiments, key=lambda e: e.model)},
-                                           indent=2) + "\n")
+        atomic_files.write_bytes(EXPERIMENTS / stimuli_name(experiment.model), experiment.stimuli)
+    atomic_files.write_text(EXPERIMENTS_FILE, json.dumps({e.model: e.as_json() for e in sorted(experiments,
+                                                                                               key=lambda e: e.model)},
+                                                         indent=2) + "\n")
 
 
 def manifest(experiment: Experiment, tolerance: float = TOLERANCE) -> bytes:

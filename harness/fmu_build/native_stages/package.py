@@ -3,30 +3,13 @@ Mach-O for FMI 2.0's darwin64), the FMI-LS-REF files, zipped reproducibly and wr
 from __future__ import annotations
 
 import io
-import os
 import struct
 import sys
-import tempfile
 import zipfile
 from pathlib import Path
 
 from harness.fmu_build import catalog as fmu_catalog
 from harness.fmu_build.native_stages import LAYER, ls_ref
-
-
-def atomic_write(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(data)
-        fmu_catalog.ordinary_file_mode(temporary)
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
-
 
 
 def fat_macho(binaries: list[bytes]) -> bytes:
@@ -93,7 +76,8 @@ def fmu_files(model: fmu_catalog.FmuSource, descriptions: dict[int, bytes], head
         files[3][f"binaries/{target.fmi3_folder}/{name}{target.extension}"] = binaries[(3, target)].read_bytes()
     if darwin:
         files[2][f"binaries/darwin64/{name}.dylib"] = fat_macho(darwin)
+    stored = name in ls_ref.stored_models()  # not yet for a new FMU's first build (harness.fmu_build.builder.ls_ref_model)
     for version in (2, 3):  # FMI-LS-REF: the reference is this machine's run of the FMU (harness.fmu_build.native_stages.ls_ref)
-        if ls_ref.runs_here(files[version], version):
+        if stored and ls_ref.runs_here(files[version], version):
             files[version].update(ls_ref.ls_ref_files(ls_ref.load(name), files[version]))
     return files

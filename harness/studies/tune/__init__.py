@@ -16,12 +16,15 @@ Search space
 Optimiser and database
     Optuna (TPE by default, CMA-ES with ``--sampler cmaes``) with its RDB storage: SQLite by
     default (``sqlite:///results/tune/<scenario>.db``, write-ahead log), any SQLAlchemy URL with
-    ``--storage``.  ``--jobs N`` keeps N trials in flight on a process pool: a finished one is told
-    and the next one asked while the others run.  Several ``tune`` processes may drive one study
-    (same ``--storage`` and study name); ``--trials N`` is the number of finished trials the study
-    should hold, so a repeated or resumed command adds only the missing ones.  A killed run leaves
-    its running trials RUNNING: the next run on the same host fails them and enqueues them again
-    with the same parameters (a dead process on another host: after the heartbeat's grace period).
+    ``--storage`` (PostgreSQL: ``postgresql+psycopg://``, the postgres extra; its password masked in
+    every output).  ``--jobs N`` keeps N trials in flight on a local pool, ``--scheduler ADDRESS`` as
+    many as a Dask cluster's workers run (harness/executors/): a finished one is told and the next
+    one asked while the others run.  Several ``tune`` processes may drive one study (same
+    ``--storage`` and ``--study``; the seed is in the default name); ``--trials N`` is the number of
+    finished trials the study should hold, so a repeated or resumed command adds only the missing
+    ones.  A killed run leaves its running trials RUNNING: the next run on the same host fails them
+    and enqueues them again with the same parameters (a dead process on another host: after the
+    heartbeat's grace period).
     The sampler is seeded per trial from ``--seed`` and the number of trials already in the study,
     so the same seed gives the same trials under sequential sampling: ``--jobs 1``, one process,
     the study run from empty without interruption.  In parallel the trials depend on the order in

@@ -151,3 +151,12 @@ def evaluate(task: dict) -> dict:
                                           f"{100 * task['tolerance']:g} %)")
     outcome["wall_s"] = clock.perf_counter() - began
     return outcome
+
+
+def evaluate_here(task: dict, files: dict) -> dict:
+    """:func:`evaluate` where the task landed: ``files`` is {instance: its FMU file on this host}
+    (harness/executors/: the same files on this machine, a Dask worker's cached copies elsewhere)."""
+    scenario = copy.deepcopy(task["scenario"])
+    for instance, path in files.items():
+        scenario.components[instance].fmu = str(path)
+    return evaluate({**task, "scenario": scenario, "fmu_paths": {}})

@@ -45,7 +45,7 @@ def _config_from(args, scenario, controller: str, out: Path) -> TuneConfig:
     return TuneConfig(scenario=scenario, controller=controller, objective=args.objective,
                       constraints=tuple(args.constraint or ()), trials=args.trials, seed=args.seed,
                       storage=args.storage, study=args.study, sampler=args.sampler,
-                      jobs=args.jobs or default_jobs(), stop=args.stop, edition=args.edition or default_edition(),
+                      jobs=args.jobs or default_jobs(), scheduler=args.scheduler, stop=args.stop, edition=args.edition or default_edition(),
                       robust=args.robust, vary=tuple(args.vary or ()), params=tuple(args.params or ()),
                       ranges=tuple(args.range or ()), out=out, tolerance=args.verify_tolerance / 100.0,
                       held_out=tuple(args.held_out) if args.held_out is not None else None)
@@ -85,9 +85,7 @@ def compare_command(args, out: Path, log) -> int:
         for seed in seeds:
             for controller in controllers:
                 config = _config_from(args, name, controller, out)
-                config.seed = seed
-                if seed != seeds[0]:  # the first repetition is the study a plain `tune` makes
-                    config.study = f"{prepare(copy.copy(config)).study_name}-seed{seed}"
+                config.seed = seed  # the study of each seed is the one a plain `tune --seed` makes
                 plan.append((scenario_name, seed, config))
     outputs = [out / "comparison.json"]
     for _, _, config in plan:  # every usage error (and a study of the same name made otherwise) before any trial
@@ -150,7 +148,8 @@ def tune_command(args) -> int:
           f"finished ({', '.join(f'{v} {k}' for k, v in sorted(summary['counts'].items()))})")
     print(f"  scenario file {summary['study_file']}  (python -m harness run {summary['study_file']} --controller "
           f"{config.controller} --edition {config.edition})")
-    print(f"  report {out / 'report.md'}; dashboard: optuna-dashboard {summary['storage']}")
+    print(f"  report {out / 'report.md'}; dashboard: optuna-dashboard {summary['dashboard']}"
+          + ("  (the password from PGPASSWORD or ~/.pgpass)" if summary["storage"] != summary["dashboard"] else ""))
     return 0
 
 
@@ -212,7 +211,11 @@ def register(commands):
                               "processes may share one")
     command.add_argument("--study", metavar="NAME",
                          help="study name (default SCENARIO-CONTROLLER-OBJECTIVE[-CONSTRAINTS][-robust])")
-    command.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
+    where = command.add_mutually_exclusive_group()
+    where.add_argument("--jobs", type=cli_args.positive_int, help="parallel processes (default: every core)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run the trials on this dask.distributed scheduler's workers (e.g. tcp://host:8786); "
+                            "the study stays in --storage (docs/tuning.md, on a cluster)")
     command.add_argument("--stop", type=cli_args.positive_float, help="stop time in s (default: the scenario's)")
     command.add_argument("--robust", action="store_true",
                          help="score each candidate's worst case over a grid of plant variations (default grid of "

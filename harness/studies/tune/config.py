@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,6 +39,7 @@ class TuneConfig:
     study: str | None = None  # None: <scenario>-<controller>-<objective>[-robust]
     sampler: str = "tpe"
     jobs: int = 1
+    scheduler: str | None = None  # a Dask scheduler's address: the trials run on its workers
     stop: float | None = None
     edition: str = "python"
     robust: bool = False
@@ -64,9 +66,48 @@ class Prepared:
     constraints: tuple
     fmu_paths: dict
     study_name: str
-    storage_url: str
+    storage_url: str  # as given: may hold a password, so never printed or written (storage_shown is)
     signature: dict
     held_out: tuple
+
+    @property
+    def storage_shown(self) -> str:
+        """The database's URL as messages, logs and files show it: its password masked (***)."""
+        return shown_url(self.storage_url)
+
+
+def _parsed_url(url: str):
+    from sqlalchemy.engine import make_url  # Optuna's dependency (the tune extra)
+
+    return make_url(url)
+
+
+def shown_url(url: str) -> str:
+    """``url`` with its password, if any, masked as ``***`` (SQLAlchemy's own rendering)."""
+    try:
+        return _parsed_url(url).render_as_string(hide_password=True)
+    except Exception:  # noqa: BLE001 - not a URL SQLAlchemy reads: mask whatever sits between ':' and '@'
+        return re.sub(r"(//[^/:@]*):[^@/]*@", r"\1:***@", url)
+
+
+def url_without_password(url: str) -> str:
+    """``url`` without its password: libpq (PostgreSQL's client library) then takes it from
+    PGPASSWORD or the password file (~/.pgpass, or PGPASSFILE), as optuna-dashboard does too."""
+    try:
+        from sqlalchemy.engine import URL
+
+        parsed = _parsed_url(url)
+        return URL.create(parsed.drivername, parsed.username, None, parsed.host, parsed.port, parsed.database,
+                          parsed.query).render_as_string(hide_password=False)
+    except Exception:  # noqa: BLE001 - as above
+        return shown_url(url)
+
+
+def has_password(url: str) -> bool:
+    try:
+        return _parsed_url(url).password is not None
+    except Exception:  # noqa: BLE001 - as above
+        return shown_url(url) != url
 
 
 def _digest(scenario) -> str:
@@ -76,6 +117,15 @@ def _digest(scenario) -> str:
             "signals": sorted(scenario.signals.items()), "bounds": sorted(scenario.bounds.items()),
             "divergence_bound": scenario.divergence_bound}
     return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def default_study_name(scenario: str, controller: str, objective: str, constraints, robust: bool, seed: int) -> str:
+    """SCENARIO-CONTROLLER-OBJECTIVE[-CONSTRAINTS][-robust][-seedN]: every setting that changes the
+    trials names the study (the seed when it is not 0, so that the names of the studies made before
+    the seed joined them stay theirs); the rest of its settings are in its signature (storage.py)."""
+    return "-".join([scenario, controller, objective]
+                    + [f"{c.score}{'le' if c.operator == '<=' else 'ge'}{c.limit:g}" for c in constraints]
+                    + (["robust"] if robust else []) + ([f"seed{seed}"] if seed else []))
 
 
 def prepare(config: TuneConfig) -> Prepared:
@@ -128,10 +178,8 @@ def prepare(config: TuneConfig) -> Prepared:
     held_out = tuple(config.held_out) if config.held_out is not None else HELD_OUT.get(scenario.name, ())
     for name in held_out:
         scenarios.load(name)
-    study_name = config.study or "-".join(
-        [scenario.name, config.controller, objective]
-        + [f"{c.score}{'le' if c.operator == '<=' else 'ge'}{c.limit:g}" for c in constraints]
-        + (["robust"] if len(grid) > 1 else []))
+    study_name = config.study or default_study_name(scenario.name, config.controller, objective, constraints,
+                                                    len(grid) > 1, config.seed)
     storage_url = config.storage or f"sqlite:///{Path(config.out) / scenario.name}.db"
     signature = {"scenario": scenario.name, "scenario_digest": _digest(scenario), "controller": config.controller,
                  "objective": objective, "constraints": sorted(c.text for c in constraints),

@@ -1,29 +1,27 @@
 """The loop: ask a trial, run its candidate, tell its outcome, until the study holds its budget.
 
-``--jobs 1``: ask, run, tell, one trial after the other (sequential sampling).  ``--jobs N``: N
-trials in flight on a process pool; a finished one is told and the next one asked while the others
-run.  The sampler is seeded per trial from ``--seed`` and the number of trials already in the
-study.
+``--jobs 1``: ask, run, tell, one trial after the other in this process (sequential sampling).
+``--jobs N``: N trials in flight on a local pool; ``--scheduler ADDRESS``: as many as the Dask
+cluster has worker threads.  A finished trial is told and the next one asked while the others run;
+only this process talks to the study's database, the workers run candidates (harness/executors/:
+the FMUs travel once per worker).  The sampler is seeded per trial from ``--seed`` and the number of
+trials already in the study.  A trial whose worker is lost is run again by the executor; one that
+kills its worker again, alone, is told PRUNED with the reason.
 """
 from __future__ import annotations
 
 import math
-import multiprocessing
 import os
-import signal
 import socket
 import time as clock
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 
 from ... import master_loop
-from .candidate import evaluate
+from ...executors import WorkerLost, open_executor
+from ...scenario_checks import resolve_fmu
+from .candidate import evaluate_here
 from .config import Prepared
 from .space import paper_conditions, parameter_values, sample_of
 from .storage import HEARTBEAT_S, Heartbeat, best_trial, recover_dead_trials
-
-
-def _ignore_interrupts():  # pool workers: Ctrl-C is the parent's to handle (it lets the round finish)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def sampler_for(kind: str, seed: int, count: int, x0: dict | None = None):
@@ -77,18 +75,6 @@ def _tell(study, trial, values: dict, outcome: dict, prepared: Prepared):
     return state
 
 
-class _Inline:
-    """The executor of ``--jobs 1``: the candidate runs in this process when submitted (sequential sampling)."""
-
-    def submit(self, function, argument):
-        future = Future()
-        future.set_result(function(argument))
-        return future
-
-    def shutdown(self, wait=True, cancel_futures=False):
-        pass
-
-
 def _best_of(trials) -> tuple | None:
     best = best_trial(trials)
     return None if best is None else (best.value, best.number)
@@ -136,13 +122,30 @@ def _ask(study, prepared: Prepared, heartbeat, owner: dict, x0, pending: list, l
     return trial, values
 
 
-def run_study(prepared: Prepared, study, log=None) -> dict:
+def candidate_files(prepared: Prepared) -> dict:
+    """{instance: FMU file} of the tuned scenario: the files every candidate reads (a Dask worker
+    receives them once)."""
+    scenario = prepared.scenario
+    return {instance: str(resolve_fmu(spec.fmu, scenario, prepared.fmu_paths))
+            for instance, spec in scenario.components.items()}
+
+
+def _lost_outcome(error: BaseException) -> dict:
+    """The outcome of a candidate whose run never came back: its worker died again while running it
+    alone (a crash in an FMU), or the candidate raised."""
+    status = "failed"
+    what = "its run killed the worker process" if isinstance(error, WorkerLost) else "its run raised"
+    return {"status": status, "reason": f"{what}: {type(error).__name__}: {error}", "scores": None, "wall_s": 0.0}
+
+
+def run_study(prepared: Prepared, study, log=None, executor=None) -> dict:
     """Run trials until the study holds ``trials`` finished ones; returns counts and timings of this call.
 
     ``--jobs 1``: ask, run, tell, one trial after the other (sequential sampling: with the same seed
-    on an empty study, the same trials).  ``--jobs N``: N trials in flight on a process pool; a
-    finished one is told and the next one asked while the others run (asynchronous: the trials
-    depend on the order in which runs finish).
+    on an empty study, the same trials).  ``--jobs N`` or ``--scheduler``: as many trials in flight as
+    the executor runs at once; a finished one is told and the next one asked while the others run
+    (asynchronous: the trials depend on the order in which runs finish).  ``executor``: one opened by
+    the caller (it is closed here), else the one of ``--jobs`` / ``--scheduler``.
     """
     import optuna
     from optuna.trial import TrialState
@@ -150,23 +153,22 @@ def run_study(prepared: Prepared, study, log=None) -> dict:
     config = prepared.config
     log = log or (lambda line: None)
     finished_states = (TrialState.COMPLETE, TrialState.PRUNED)
+    master_loop.library()  # the compiled loop, once, before the workers start
+    executor = executor or open_executor(config.jobs, config.scheduler, files=candidate_files(prepared),
+                                         inline_single=True)
+    where = executor.describe()
     heartbeat = Heartbeat(study._storage)
     recovered, _ = recover_dead_trials(study)
     if recovered:
         log(f"note: trials {', '.join(map(str, recovered))} of a killed run are run again (same parameters)")
     owner = {"host": socket.gethostname(), "pid": os.getpid()}
     x0 = sample_of(prepared.dimensions, prepared.fixed) if config.sampler == "cmaes" else None
-    if config.jobs > 1:
-        master_loop.library()  # the compiled loop, once, before the workers start
-        executor = ProcessPoolExecutor(max_workers=config.jobs, mp_context=multiprocessing.get_context("spawn"),
-                                       initializer=_ignore_interrupts)
-    else:
-        executor = _Inline()
     pending, in_flight = [], {}
     ran, began, simulated, stale_checked = 0, clock.perf_counter(), 0.0, -math.inf
+    interrupted = False
     try:
         while True:
-            while len(in_flight) < config.jobs:
+            while len(in_flight) < executor.slots:
                 if clock.monotonic() - stale_checked > HEARTBEAT_S:  # trials of dead processes elsewhere
                     optuna.storages.fail_stale_trials(study)
                     stale_checked = clock.monotonic()
@@ -180,7 +182,10 @@ def run_study(prepared: Prepared, study, log=None) -> dict:
                     recovered, waiting = recover_dead_trials(study, mine)
                     if recovered:
                         log(f"note: trials {', '.join(map(str, recovered))} of a killed run are run again")
-                    elif waiting:  # a trial nobody has claimed yet: its process may have died right after asking
+                    elif waiting or running:
+                        # a trial nobody has claimed yet (its process may have died right after asking), or
+                        # one another process runs: wait until it finishes or its heartbeat goes silent
+                        # (fail_stale_trials above, then it is queued again), so the study reaches its budget
                         clock.sleep(1.0)
                     else:
                         break
@@ -191,16 +196,15 @@ def run_study(prepared: Prepared, study, log=None) -> dict:
                     continue
                 trial, values = asked
                 task = {"scenario": prepared.scenario, "values": values, "grid": prepared.grid,
-                        "fmu_paths": prepared.fmu_paths, "objective": config.objective,
-                        "verify_below": best[0] if best is not None else math.inf,
+                        "objective": config.objective, "verify_below": best[0] if best is not None else math.inf,
                         "tolerance": config.tolerance}
-                in_flight[executor.submit(evaluate, task)] = (trial, values)
+                executor.submit(evaluate_here, task, key=trial.number)
+                in_flight[trial.number] = (trial, values)
             if not in_flight:
                 break
-            done, _ = wait(list(in_flight), return_when=FIRST_COMPLETED)
-            for future in sorted(done, key=lambda f: in_flight[f][0].number):
-                trial, values = in_flight.pop(future)
-                outcome = future.result()
+            for done in sorted(executor.next_done(), key=lambda d: d.key):
+                trial, values = in_flight.pop(done.key)
+                outcome = done.value if done.ok else _lost_outcome(done.error)
                 pending.remove(trial)
                 heartbeat.remove(trial._trial_id)
                 try:
@@ -219,6 +223,7 @@ def run_study(prepared: Prepared, study, log=None) -> dict:
                 log(_progress_line(trial, "complete" if state == TrialState.COMPLETE else "pruned", outcome,
                                    config.objective, best, config.trials))
     except BaseException:
+        interrupted = True
         for trial in pending:  # interrupted: these run again next time, with the same parameters
             try:
                 study._storage.set_trial_user_attr(trial._trial_id, "outcome", {
@@ -231,5 +236,5 @@ def run_study(prepared: Prepared, study, log=None) -> dict:
         raise
     finally:
         heartbeat.close()
-        executor.shutdown(wait=True, cancel_futures=True)
-    return {"ran": ran, "wall_s": clock.perf_counter() - began, "simulated_s": simulated}
+        executor.close(cancel=interrupted)  # an interrupt or an error stops the workers where they are
+    return {"ran": ran, "wall_s": clock.perf_counter() - began, "simulated_s": simulated, "executor": where}

@@ -39,7 +39,7 @@ def study_markdown(summary: dict, folder: Path) -> str:
                  + (f", constraints {', '.join(summary['constraints'])}" if summary["constraints"] else "")
                  + f"; horizon {horizon}, step {summary['step']:g} s, {summary['edition']} edition, sampler "
                  f"{summary['sampler']}, seed {summary['seed']}; database `{summary['storage']}` "
-                 f"(`optuna-dashboard {summary['storage']}` shows it live).")
+                 f"(`optuna-dashboard {summary.get('dashboard', summary['storage'])}` shows it live).")
     counts = ", ".join(f"{count} {status}" for status, count in sorted(summary["counts"].items()))
     lines += ["", f"**Trials**: {summary['finished']} finished of {summary['trials']} ({counts})."]
     run = summary.get("run")

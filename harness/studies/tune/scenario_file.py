@@ -33,7 +33,7 @@ def write_tuned_toml(prepared: Prepared, trial, path: Path) -> Path:
     tuned = tuned_scenario(prepared, outcome["parameters"])
     edition = prepared.config.edition
     comments = [f"Tuned by `python -m harness tune` (docs/tuning.md): study {prepared.study_name!r} in "
-                f"{prepared.storage_url}, trial #{trial.number}.",
+                f"{prepared.storage_shown}, trial #{trial.number}.",
                 f"{objective} = {scores[objective]!r} at step {prepared.scenario.step:g} s with the {edition} "
                 f"edition" + (" (worst case over the --robust grid; this file is its base point)"
                               if len(prepared.grid) > 1 else "") + ".",

@@ -8,6 +8,7 @@ import datetime
 import json
 import math
 import os
+import re
 import socket
 import threading
 import time as clock
@@ -16,7 +17,7 @@ from pathlib import Path
 
 from ... import cli_args
 from ...fmi import process_alive
-from .config import Prepared
+from .config import Prepared, shown_url
 from .errors import TuneError
 from .space import sample_of
 
@@ -48,11 +49,111 @@ def _sqlite_pragmas(storage) -> None:
     storage.engine.dispose()  # connections opened from here on get the pragmas
 
 
+#: network file systems, on which SQLite's locks and its write-ahead log's shared memory do not hold
+NETWORK_FILE_SYSTEMS = ("nfs", "nfs4", "cifs", "smb3", "smbfs", "ncpfs", "afs", "9p", "fuse.sshfs", "lustre", "gpfs",
+                        "ceph", "fuse.ceph", "glusterfs", "fuse.glusterfs", "beegfs", "fuse.s3fs", "davfs")
+#: the SQLAlchemy dialect+driver -> (the driver's module, how to install it)
+DRIVERS = {"postgresql": ("psycopg2", "use postgresql+psycopg://... with psycopg 3, in the postgres extra: "
+                                      "pip install -e '.[postgres]'"),
+           "postgresql+psycopg": ("psycopg", "pip install -e '.[postgres]' (psycopg 3)"),
+           "postgresql+psycopg2": ("psycopg2", "pip install psycopg2-binary, or use postgresql+psycopg://... with "
+                                               "the postgres extra: pip install -e '.[postgres]'"),
+           "mysql": ("MySQLdb", "pip install mysqlclient, or use mysql+pymysql://... with pip install pymysql")}
+
+
+def sqlite_file(url: str) -> Path | None:
+    """The file of an SQLite URL (None for another database or an in-memory one)."""
+    if not url.startswith("sqlite:///"):
+        return None
+    path = url[len("sqlite:///"):].split("?", 1)[0]
+    return None if path in ("", ":memory:") else Path(path)
+
+
+def file_system_of(path: Path, mounts: str | None = None) -> str:
+    """The type of the file system that holds ``path`` (Linux: /proc/mounts; '' where unknown)."""
+    if mounts is None:
+        try:
+            mounts = Path("/proc/mounts").read_text()
+        except OSError:
+            return ""
+    folder = str(Path(os.path.abspath(path)).parent)
+    best, kind = "", ""
+    for line in mounts.splitlines():
+        fields = line.split()
+        if len(fields) < 3:
+            continue
+        point = fields[1].replace("\\040", " ")
+        inside = folder == point or folder.startswith(point.rstrip("/") + "/")
+        if inside and len(point) >= len(best):
+            best, kind = point, fields[2]
+    return kind
+
+
+def refuse_shared_sqlite(url: str, mounts: str | None = None) -> None:
+    """An SQLite file on a network file system is refused (one line): its locks and write-ahead log hold
+    for the processes of one host only, so tune processes on several hosts would corrupt it."""
+    path = sqlite_file(url)
+    if path is None:
+        return
+    kind = file_system_of(path, mounts)
+    if kind in NETWORK_FILE_SYSTEMS:
+        raise TuneError(f"--storage {url}: {path} is on a network file system ({kind}); SQLite's locks and "
+                        "write-ahead log hold only for processes of one host: keep the file on a local disk, or "
+                        "share the study through a database server (--storage postgresql+psycopg://...; "
+                        "docs/tuning.md)")
+
+
+def _innermost(error: BaseException) -> BaseException:
+    """The driver's own error under SQLAlchemy's and Optuna's wrappers."""
+    seen = set()
+    while id(error) not in seen:
+        seen.add(id(error))
+        inner = getattr(error, "orig", None) or error.__cause__
+        if inner is None:
+            break
+        error = inner
+    return error
+
+
+def connection_problem(url: str, error: BaseException) -> str:
+    """One line saying why the database at ``url`` cannot be opened, and what to do; the URL's password
+    never appears in it."""
+    shown = shown_url(url)
+    root = _innermost(error)
+    dialect = url.split("://", 1)[0]
+    if isinstance(root, ModuleNotFoundError) or (isinstance(error, ImportError) and "DB access module" in str(error)):
+        module, how = DRIVERS.get(dialect, (getattr(root, "name", None) or dialect, "install its SQLAlchemy driver"))
+        return f"--storage {shown}: the database driver {module} is not installed: {how}"
+    lines = [line.strip() for line in str(root).splitlines() if line.strip()
+             and not line.strip().startswith("(Background on this error")]
+    text = "; ".join(re.sub(r"^connection failed: ", "", re.sub(r"FATAL:\s+", "", line)) for line in lines)
+    text = text or cli_args.one_line(error)
+    if "password authentication failed" in text:
+        text += " (the password comes from the URL, PGPASSWORD or the password file ~/.pgpass / PGPASSFILE)"
+    elif re.search(r'database ".*" does not exist', text):
+        text += " (create it first, e.g. createdb NAME, or name one that exists)"
+    password = _password_of(url)
+    if password:
+        text = text.replace(password, "***")
+    return f"--storage {shown}: cannot open the database: {text}"
+
+
+def _password_of(url: str) -> str | None:
+    try:
+        from sqlalchemy.engine import make_url
+
+        return make_url(url).password
+    except Exception:  # noqa: BLE001 - not a URL: nothing to mask beyond shown_url
+        return None
+
+
 def open_storage(url: str):
-    """Optuna's RDB storage at ``url`` with heartbeats; a database that cannot be opened is a TuneError."""
+    """Optuna's RDB storage at ``url`` with heartbeats; a database that cannot be opened is a TuneError
+    (one line, the password masked)."""
     import optuna
 
     _quiet_optuna()
+    refuse_shared_sqlite(url)
     sqlite = url.startswith("sqlite")
     for attempt in range(10):
         try:
@@ -72,7 +173,43 @@ def open_storage(url: str):
             if any(word in text for word in racing) and attempt < 9:
                 clock.sleep(0.2 * (attempt + 1))
                 continue
-            raise TuneError(f"--storage {url}: cannot open the database: {text}") from None
+            raise TuneError(connection_problem(url, error)) from None
+
+
+class StudyWriteError(RuntimeError):
+    """The study's database refused a write mid-run (a full disk, a file size limit, a server gone):
+    one line naming the database, exit 1; the trials committed before stay in the study."""
+
+
+def _chain(error: BaseException) -> list:
+    found, seen = [], set()
+    while error is not None and id(error) not in seen:
+        seen.add(id(error))
+        found.append(error)
+        error = getattr(error, "orig", None) or error.__cause__ or error.__context__
+    return found
+
+
+def storage_write_problem(prepared: Prepared, error: BaseException) -> str | None:
+    """One line for an error of the study's database during the run (None for any other error): the
+    database's file (or masked URL) and the driver's own words, e.g. "database or disk is full"."""
+    import optuna
+    from sqlalchemy import exc as sqlalchemy_errors
+
+    chain = _chain(error)
+    if not any(isinstance(e, (optuna.exceptions.StorageInternalError, sqlalchemy_errors.SQLAlchemyError))
+               for e in chain):
+        return None
+    root = chain[-1]
+    lines = [line.strip() for line in str(root).splitlines() if line.strip()
+             and not line.strip().startswith("(Background on this error")]
+    text = "; ".join(lines) or type(root).__name__
+    password = _password_of(prepared.storage_url)
+    if password:
+        text = text.replace(password, "***")
+    where = sqlite_file(prepared.storage_url) or prepared.storage_shown
+    return (f"the study database {where} could not be written: {type(root).__name__}: {text}; the trials "
+            "told before are kept: free space (or mend the database) and run the same command to resume")
 
 
 def _signature_difference(stored: dict, wanted: dict) -> list:
@@ -99,6 +236,7 @@ def open_study(prepared: Prepared, storage):
             exists = True
         else:
             study.set_user_attr("signature", prepared.signature)
+            study.set_user_attr("seed", prepared.config.seed)
             start = sample_of(prepared.dimensions, prepared.fixed)
             study.enqueue_trial(start, user_attrs={"start": True}, skip_if_exists=False)
             return study
@@ -116,13 +254,23 @@ def check_signature(study, prepared: Prepared) -> None:
             break
         clock.sleep(0.1)
     else:
-        raise TuneError(f"study {name!r} in {prepared.storage_url} was not made by tune (no signature); "
+        raise TuneError(f"study {name!r} in {prepared.storage_shown} was not made by tune (no signature); "
                         "name another study with --study NAME")
     differences = _signature_difference(stored, prepared.signature)
     if differences:
-        raise TuneError(f"study {name!r} in {prepared.storage_url} was made with other settings: "
+        raise TuneError(f"study {name!r} in {prepared.storage_shown} was made with other settings: "
                         f"{'; '.join(differences)}; resume it with its settings or name another study with "
                         "--study NAME")
+
+
+def seed_note(study, prepared: Prepared) -> str | None:
+    """A line when this process samples the study with another seed than the one it was made with (a
+    study shared on purpose: ``--study NAME`` given to several processes, each with its own seed)."""
+    made_with = study.user_attrs.get("seed")
+    if made_with is None or made_with == prepared.config.seed:
+        return None
+    return (f"note: study {prepared.study_name!r} was made with --seed {made_with}; this process samples its "
+            f"trials with --seed {prepared.config.seed} (processes sharing a study should differ in seed)")
 
 
 def check_existing(prepared: Prepared) -> None:

@@ -6,17 +6,23 @@ import json
 from pathlib import Path
 
 from ... import cli_args
+from ...executors import SchedulerLost, open_executor
 from ...fmi import release_extractions
 from .config import Prepared, TuneConfig, prepare
-from .loop import run_study
+from .loop import candidate_files, run_study
 from .report import REPORT_NAME, figure_pareto, figure_progress, write_report
 from .scenario_file import file_stem, write_tuned_toml
-from .storage import best_trial, open_storage, open_study, outcome_of
+from .storage import (StudyWriteError, best_trial, open_storage, open_study, outcome_of, seed_note, sqlite_file,
+                      storage_write_problem)
 from .summary import held_out_runs, summarize
 
 
 def tune(config: TuneConfig, log=None, outputs: bool = True) -> dict:
-    """Prepare, open the study, run it, write the outputs; returns the study's summary (plain data)."""
+    """Prepare, open the study, run it, write the outputs; returns the study's summary (plain data).
+
+    Everything that can be refused is refused before the first trial (one line each): the inputs, the
+    output folder, the database, the executor (a Dask scheduler that cannot be reached).
+    """
     prepared = prepare(config)
     if outputs:  # before the database and the first trial: a folder it cannot write is one line, not lost trials
         cli_args.check_writable(study_outputs(prepared))
@@ -26,11 +32,30 @@ def tune(config: TuneConfig, log=None, outputs: bool = True) -> dict:
     storage = open_storage(prepared.storage_url)
     study = open_study(prepared, storage)
     log = log or (lambda line: None)
-    log(f"study {prepared.study_name!r} in {prepared.storage_url}: {len(prepared.dimensions)} parameters "
-        f"({', '.join(d.name for d in prepared.dimensions)}), {config.edition} edition, {config.jobs} process(es)")
+    note = seed_note(study, prepared)
+    if note:
+        log(note)
+    executor = open_executor(config.jobs, config.scheduler, files=candidate_files(prepared), inline_single=True)
+    where = executor.describe()
+    log(f"study {prepared.study_name!r} in {prepared.storage_shown}: {len(prepared.dimensions)} parameters "
+        f"({', '.join(d.name for d in prepared.dimensions)}), {config.edition} edition, trials on {where}")
+    database = sqlite_file(prepared.storage_url)
+    if config.scheduler and database is not None:
+        log(f"note: the study stays in the SQLite file {database} on this host: the Dask workers run the "
+            "candidates and only this process writes the study; tune processes on other hosts cannot share it "
+            "(use --storage postgresql+psycopg://... for that)")
     try:
-        run_info = run_study(prepared, study, log)
-        run_info["jobs"] = config.jobs
+        try:
+            run_info = run_study(prepared, study, log, executor)
+        except SchedulerLost as error:
+            raise SchedulerLost(f"{error}: the study keeps its finished trials and queues the running ones again; "
+                                "run the same command to resume") from None
+        except Exception as error:
+            problem = storage_write_problem(prepared, error)
+            if problem is None:
+                raise
+            raise StudyWriteError(problem) from None
+        run_info["jobs"] = config.jobs if config.scheduler is None else executor.slots
         if not outputs:
             summary = summarize(prepared, study, run_info)
             summary["study_file"] = None

@@ -9,7 +9,7 @@ from ... import cli_args
 from ... import scenario as scenarios
 from ...cases import parallel_map
 from .candidate import evaluate
-from .config import Prepared
+from .config import Prepared, url_without_password
 from .storage import best_trial, is_feasible, outcome_of
 
 
@@ -107,7 +107,8 @@ def summarize(prepared: Prepared, study, run_info: dict | None = None) -> dict:
         first_better = next((n for n, b in best_so_far(trials) if b < reference), None)
     importance, evaluator = importances(study)
     summary = {
-        "study": prepared.study_name, "storage": prepared.storage_url, "scenario": prepared.scenario.name,
+        "study": prepared.study_name, "storage": prepared.storage_shown,
+        "dashboard": url_without_password(prepared.storage_url), "scenario": prepared.scenario.name,
         "controller": prepared.config.controller, "objective": objective,
         "constraints": [c.text for c in prepared.constraints], "sampler": prepared.config.sampler,
         "edition": prepared.config.edition, "step": prepared.scenario.step, "stop": prepared.scenario.stop,

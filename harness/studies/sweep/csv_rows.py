@@ -14,10 +14,10 @@ import math
 import os
 from pathlib import Path
 
-from ..cases import STATUSES
-from ..scenario import ScenarioError
-from ..scores import SCORE_KEYS
-from ..variants import CONTROLLER_VARIANTS
+from ...cases import STATUSES
+from ...scenario import ScenarioError
+from ...scores import SCORE_KEYS
+from ...variants import CONTROLLER_VARIANTS
 
 CSV_NAME = "sweep.csv"
 SETTINGS_NAME = "sweep.json"

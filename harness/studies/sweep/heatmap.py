@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..units import score_units, variable_unit, with_unit
-from .sweep_grid import SCENARIO_SETTINGS, SweepPlan, value_key
+from ...units import score_units, variable_unit, with_unit
+from .grid import SCENARIO_SETTINGS, SweepPlan, value_key
 
 
 def heatmap_arrays(plan: SweepPlan, rows: list, controller: str):

@@ -12,12 +12,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import scenario as scenarios
-from ..master import ALGORITHMS, Master
-from ..scenario import Scenario, ScenarioError
-from ..scenario_checks import resolve_fmu
-from ..scores import SCORE_KEYS
-from ..variants import CONTROLLER_VARIANTS
+from ... import scenario as scenarios
+from ...master import ALGORITHMS, Master
+from ...scenario import Scenario, ScenarioError
+from ...scenario_checks import resolve_fmu
+from ...scores import SCORE_KEYS
+from ...variants import CONTROLLER_VARIANTS
 
 SCENARIO_SETTINGS = ("step", "stop")  # sweepable scenario settings besides instance parameters
 KEY_DIGITS = 12  # grid values match on resume when equal to 12 significant digits

@@ -1,6 +1,6 @@
-"""The regression's outputs: report.md, report.html with the plots of failing signals, JUnit XML.
+"""The regression's reports: report.md, report.html with the figures of failing signals, JUnit XML.
 
-Written by ``python -m harness regress`` (harness/studies/regression.py) from its comparisons:
+Written by ``python -m harness regress`` (:mod:`.command`) from its comparisons:
 
 * ``report.md``: the summary table and every signal (pass/fail, largest excursion and where);
 * ``report.html``: a static page (no server, no script: it opens from a CI artifact) with the
@@ -10,8 +10,6 @@ Written by ``python -m harness regress`` (harness/studies/regression.py) from it
   signal, its largest excursion and its time, the report's path in the case's output, the wall
   time of the run and of the reference's run (and a flag when the run is more than
   ``SLOW_FACTOR`` times slower), as GitHub Actions, GitLab CI and Jenkins read it.
-
-This module reads the comparisons' attributes only; it imports no other study.
 """
 from __future__ import annotations
 
@@ -22,23 +20,15 @@ import re
 import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
-import numpy as np
-
-from .. import scenario as scenarios
-from ..units import variable_unit, with_unit
+from ... import atomic_files
+from .comparison import code_span
+from .figures import draw_failing_signals, slug
+from .references import DEFAULT_TOLERANCES, REFERENCE_DIR, relative
+from .runs import POINTS
 
 SLOW_FACTOR = 2.0  # a case whose run takes more than this times its reference's run is flagged
 SUMMARY_HEADER = ["case", "result", "signals in tube", "worst signal", "max outside tube", "at t [s]",
                   "max abs deviation", "run [s]", "reference run [s]", "notes"]
-
-
-def slug(text: str) -> str:
-    """A file and anchor name from a case label and a signal (letters, digits, '.', '_', '-')."""
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_")
-
-
-def plot_name(comparison, signal) -> str:
-    return f"{slug(comparison.case.label)}_{signal.signal}.png"
 
 
 def _format_tolerances(tolerances: dict) -> str:
@@ -51,74 +41,37 @@ def slowness(comparison) -> str:
     return f"{ratio:.1f}x slower than the reference run" if ratio is not None and ratio > SLOW_FACTOR else ""
 
 
-# ------------------------------------------------------------------ plots
-def plot_signal(path: Path, case, comparison, reference, run):
-    """Reference, tube and new result over the whole horizon, a zoom around the worst point, and the
-    excursion outside the tube; the largest excursion is marked on all three."""
-    import matplotlib  # here, not at module level: a heavy import, paid only when a failing signal is drawn
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    name = comparison.signal
-    unit = variable_unit(scenarios.load(case.scenario), name)
-    funnel = comparison.funnel or {}
-    figure, (whole, zoom, excursion) = plt.subplots(3, 1, figsize=(9, 8), gridspec_kw={"height_ratios": [3, 3, 1.3]})
-    worst = comparison.t_max_error
-    for axis in (whole, zoom):
-        if "lowerBound" in funnel:
-            lower, upper = funnel["lowerBound"], funnel["upperBound"]
-            grid = np.union1d(lower[:, 0], upper[:, 0])
-            axis.fill_between(grid, np.interp(grid, lower[:, 0], lower[:, 1]), np.interp(grid, upper[:, 0], upper[:, 1]),
-                              color="tab:gray", alpha=0.35, lw=0, label="tube")
-        axis.plot(reference.time, reference.signals[name], color="k", lw=0.9, label="reference")
-        axis.plot(run.time, run.signals[name], color="tab:red", lw=0.9, label="new result")
-        if worst is not None and np.isfinite(worst):
-            value = float(np.interp(worst, run.time, run.signals[name]))
-            if np.isfinite(value):
-                axis.plot([worst], [value], "o", ms=9, mfc="none", mec="tab:blue", mew=1.5,
-                          label=f"largest excursion (t = {worst:.4g} s)")
-        axis.set_ylabel(with_unit(name, unit))
-    centre = worst if worst is not None else float(reference.time[-1]) / 2
-    half = 0.02 * float(reference.time[-1] - reference.time[0]) + 1e-9
-    inside = (reference.time >= centre - half) & (reference.time <= centre + half)
-    if inside.any():
-        values = np.concatenate([reference.signals[name][inside], run.signals[name][inside]])
-        values = values[np.isfinite(values)]
-        if values.size:
-            margin = 0.2 * (values.max() - values.min()) + 1e-12
-            zoom.set_ylim(values.min() - margin, values.max() + margin)
-    zoom.set_xlim(centre - half, centre + half)
-    zoom.set_title(f"zoom around t = {centre:.4g} s", fontsize=8)
-    whole.set_title(f"{case.label}: {name} ({comparison.message or 'inside the tube'})", fontsize=9)
-    whole.legend(fontsize=8, loc="best")
-    if "errors" in funnel:
-        excursion.plot(funnel["errors"][:, 0], funnel["errors"][:, 1], color="tab:red", lw=0.8)
-        if worst is not None:
-            excursion.axvline(worst, color="tab:blue", lw=0.8, ls="--")
-    excursion.set_ylabel(with_unit("outside tube", unit))
-    excursion.set_xlabel("time (s)")
-    figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
-
-
-def draw_failing_signals(comparisons, runs, references, directory: Path):
-    """A PNG for every failing signal that has a reference (old PNGs removed); sets ``signal.plot``."""
-    for old in directory.glob("*.png"):
-        old.unlink()
-    for comparison, run, reference in zip(comparisons, runs, references):
-        for signal in comparison.signals:
-            if not signal.passed and reference is not None and signal.signal in reference.signals:
-                path = directory / plot_name(comparison, signal)
-                plot_signal(path, comparison.case, signal, reference, run)
-                signal.plot = path
-
-
 # --------------------------------------------------------------- markdown
-def _table(rows, header) -> list[str]:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+class Markdown(str):
+    """Text that is Markdown already (``**FAIL**``, an image): written as it is."""
+
+
+#: a code span of CommonMark: a run of backticks, the text, the same run (``a`b`` holds a backtick)
+CODE_SPAN = re.compile(r"(?<!`)(`+)(?!`)(.+?)(?<!`)\1(?!`)")
+#: Markdown's punctuation that could make a name a link, an image, emphasis or a table cell's end
+_MARKDOWN_PUNCTUATION = re.compile(r"([\\`*\[\]|~])")
+
+
+def markdown_text(text) -> str:
+    """Text for Markdown (a table cell): raw HTML and Markdown syntax in file, instance and signal names show
+    as written (``<`` ``>`` ``&`` as entities, the punctuation backslash-escaped, ``|`` too); the text's own
+    code spans stay code spans."""
+    if isinstance(text, Markdown):
+        return str(text)
+    text, parts, last = str(text), [], 0
+    for span in CODE_SPAN.finditer(text):
+        parts.append(_MARKDOWN_PUNCTUATION.sub(r"\\\1", html.escape(text[last:span.start()], quote=False)))
+        parts.append(span.group(0).replace("|", "\\|"))
+        last = span.end()
+    parts.append(_MARKDOWN_PUNCTUATION.sub(r"\\\1", html.escape(text[last:], quote=False)))
+    return "".join(parts)
+
+
+def markdown_table(rows, header, escape: bool = True) -> list[str]:
+    """A Markdown table; ``escape=False``: the cells as they are (the summary printed on a terminal)."""
+    shown = markdown_text if escape else str
+    lines = ["| " + " | ".join(shown(cell) for cell in header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(shown(cell) for cell in row) + " |" for row in rows]
     return lines
 
 
@@ -132,7 +85,7 @@ def summary_rows(comparisons) -> list:
         failed = [s for s in comparison.signals if not s.passed]
         worst = worst_signal(comparison)
         notes = [comparison.message or ", ".join(s.signal for s in failed), slowness(comparison), *comparison.notes]
-        rows.append([comparison.case.label, "pass" if comparison.passed else "**FAIL**",
+        rows.append([comparison.case.label, "pass" if comparison.passed else Markdown("**FAIL**"),
                      f"{len(comparison.signals) - len(failed)}/{len(comparison.signals)}",
                      worst.signal if worst else "-",
                      f"{worst.max_error:.3g}" if worst else "-",
@@ -149,7 +102,7 @@ def _header_lines(comparisons, reference_dir, tolerances: dict, points: int) -> 
     title = f"Regression report ({passed}/{len(comparisons)} cases pass)"
     generated = (f"Generated {datetime.datetime.now().replace(microsecond=0).isoformat()} by "
                  f"`python -m harness regress` on {platform.node() or 'this machine'}; references in "
-                 f"`{reference_dir}`.")
+                 f"{code_span(str(reference_dir))}.")
     tolerance = (f"Tolerances (pyfunnel): {_format_tolerances(tolerances)}, unless a reference's metadata sets its "
                  f"own (per case or per signal: listed with the signal); signals resampled to {points} points "
                  f"over each scenario's horizon. A run more than {SLOW_FACTOR:g}x slower than its reference's "
@@ -159,21 +112,22 @@ def _header_lines(comparisons, reference_dir, tolerances: dict, points: int) -> 
 
 def write_markdown(comparisons, path: Path, reference_dir, tolerances: dict, points: int) -> Path:
     title, generated, tolerance = _header_lines(comparisons, reference_dir, tolerances, points)
-    lines = [f"# {title}", "", generated, "", tolerance, "", "Also as a web page: [report.html](report.html).", "",
-             "## Summary", ""]
-    lines += _table(summary_rows(comparisons), SUMMARY_HEADER)
+    lines = [f"# {title}", "", markdown_text(generated), "", markdown_text(tolerance), "",
+             "Also as a web page: [report.html](report.html).", "", "## Summary", ""]
+    lines += markdown_table(summary_rows(comparisons), SUMMARY_HEADER)
     lines += ["", "## Signals", ""]
     rows = []
     for comparison in comparisons:
         for s in comparison.signals:
-            plot = f"![]({s.plot.name})" if s.plot else ""
-            rows.append([comparison.case.label, s.signal, "pass" if s.passed else "**FAIL**", f"{s.max_error:.3g}",
+            plot = Markdown(f"![]({s.plot.name})") if s.plot else ""
+            rows.append([comparison.case.label, s.signal, "pass" if s.passed else Markdown("**FAIL**"),
+                         f"{s.max_error:.3g}",
                          f"{s.t_max_error:.4g}" if s.t_max_error is not None else "-", f"{s.max_deviation:.3g}",
                          f"{s.t_max_deviation:.4g}" if s.t_max_deviation is not None else "-",
                          _own_tolerances(comparison, s), s.message, plot])
-    lines += _table(rows, ["case", "signal", "result", "max outside tube", "at t [s]", "max abs deviation",
+    lines += markdown_table(rows, ["case", "signal", "result", "max outside tube", "at t [s]", "max abs deviation",
                            "at t [s]", "own tolerances", "message", "plot"])
-    path.write_text("\n".join(lines) + "\n")
+    atomic_files.write_text(path, "\n".join(lines) + "\n")
     return path
 
 
@@ -200,7 +154,8 @@ figcaption { font-size: 0.85em; color: #555; }
 
 def _inline(text: str) -> str:
     """Escaped text with `code` spans as <code>."""
-    return re.sub(r"`([^`]+)`", r"<code>\1</code>", html.escape(text))
+    return CODE_SPAN.sub(lambda span: f"<code>{span.group(2).strip() if span.group(1) != '`' else span.group(2)}"
+                                      "</code>", html.escape(text))
 
 
 def _cell(text, css: str = "") -> str:
@@ -277,7 +232,7 @@ def write_html(comparisons, path: Path, reference_dir, tolerances: dict, points:
              _cell(_own_tolerances(c, s))] for c, s in passing]
     lines += _html_table(["case", "signal", "max abs deviation", "at t [s]", "own tolerances"], rows)
     lines += ["</body>", "</html>"]
-    path.write_text("\n".join(lines) + "\n")
+    atomic_files.write_text(path, "\n".join(lines) + "\n")
     return path
 
 
@@ -339,6 +294,19 @@ def write_junit(comparisons, path: Path, report: Path | None, suite: str = "afc-
         ElementTree.SubElement(testcase, "system-out").text = "\n".join(output)
     ElementTree.indent(root)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    ElementTree.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+    with atomic_files.replacing(path, "wb") as stream:
+        ElementTree.ElementTree(root).write(stream, encoding="utf-8", xml_declaration=True)
     return path
+
+
+# ----------------------------------------------------------- both reports
+def write_report(comparisons, runs, references, directory: Path, tolerances: dict,
+                 reference_dir: Path = REFERENCE_DIR) -> Path:
+    """report.md and report.html (with a PNG of every failing signal) in ``directory``; returns report.md."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    draw_failing_signals(comparisons, runs, references, directory)
+    shown = relative(reference_dir) + "/"
+    tolerances = {**DEFAULT_TOLERANCES, **(tolerances or {})}
+    write_html(comparisons, directory / "report.html", shown, tolerances, POINTS)
+    return write_markdown(comparisons, directory / "report.md", shown, tolerances, POINTS)
