@@ -18,6 +18,13 @@
 
 #define PLANT_MAX_STATES 8
 
+/* inlined at every call, also where a plant calls it twice (its plant_advance, once per set of constants) */
+#if defined(__GNUC__)
+#define PLANT_ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define PLANT_ALWAYS_INLINE inline
+#endif
+
 /* dx of the model at (t, x) with input u; params: the model's constants */
 typedef void (*PlantDerivative)(double t, const double x[], double u, const double *params, double dx[]);
 
@@ -45,7 +52,7 @@ static inline Rk4Split rk4_split(double step_size, double max_internal_step) {
 
 /* advance (x[0], x[1]) from t to t + step_size with u held, in the split's n equal RK4 steps h that start
  * at t + i h (not at an accumulated sum) */
-static inline void rk4_advance(PlantDerivative derivative, double t, double x[2], double u, const Rk4Split *split,
+static PLANT_ALWAYS_INLINE void rk4_advance(PlantDerivative derivative, double t, double x[2], double u, const Rk4Split *split,
                                const double *params) {
     long n = split->n;
     double h = split->h, half = split->half, sixth = split->sixth;
