@@ -327,16 +327,21 @@ MESSAGE_PATH static int fail_adaptation_diverged(ModelInstance *m, double curren
                     step_size, tau, numbers_text(modified, sizeof modified, error, STATE(m)->p.order, "()"));
 }
 
-int model_step(ModelInstance *m, double current_time, double step_size) {
-    ControllerState *state = STATE(m);
-#if HOST_ROBUST
-    if (state->latch.open != 0.0 && watch_initial_error(m, current_time) != MODEL_OK) return MODEL_ERROR;
+#if defined(__GNUC__)
+#define SHAPE_INLINE inline __attribute__((always_inline))
+#else
+#define SHAPE_INLINE inline
 #endif
+
+/* the adaptive law's step [31] from the latched state; `paper_shape` (a constant where it is inlined): n = 2,
+ * m = 2 (default_shape), so that the loops over the 4 rules are unrolled and the variables read by name */
+static SHAPE_INLINE int adapt(ModelInstance *m, double current_time, double step_size, const int paper_shape) {
+    ControllerState *state = STATE(m);
     double *values = m->s->values;
     const ControllerParameters *p = &state->p;
-    int n = p->order, rules = p->rules;
+    int n = paper_shape ? 2 : p->order, rules = paper_shape ? 4 : p->rules;
     double error[MAX_ORDER], theta[MAX_RULES], adapted[MAX_RULES];
-    if (default_shape(p)) {
+    if (paper_shape) {
         error[0] = V(m, E), error[1] = V(m, dE);
         theta[0] = V(m, theta1), theta[1] = V(m, theta2), theta[2] = V(m, theta3), theta[3] = V(m, theta4);
     } else {
@@ -351,7 +356,7 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     double theta_sum = 0.0;
     for (int j = 0; j < rules; j++) theta_sum += adapted[j];
     if (!isfinite(w_hat + theta_sum)) return fail_adaptation_diverged(m, current_time, step_size, tau, error);
-    if (default_shape(p)) {
+    if (paper_shape) {
         V(m, theta1) = adapted[0], V(m, theta2) = adapted[1], V(m, theta3) = adapted[2], V(m, theta4) = adapted[3];
     } else {
         for (int j = 0; j < rules; j++) values[VRS_theta[j]] = adapted[j];
@@ -361,6 +366,14 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     if (chatter_update(&state->chatter, V(m, u), step_size)) warn_chatter(m, step_size);
 #endif
     return MODEL_OK;
+}
+
+int model_step(ModelInstance *m, double current_time, double step_size) {
+    ControllerState *state = STATE(m);
+#if HOST_ROBUST
+    if (state->latch.open != 0.0 && watch_initial_error(m, current_time) != MODEL_OK) return MODEL_ERROR;
+#endif
+    return default_shape(&state->p) ? adapt(m, current_time, step_size, 1) : adapt(m, current_time, step_size, 0);
 }
 
 /* ---------------------------------------------------------------- model exchange */
