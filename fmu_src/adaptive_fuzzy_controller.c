@@ -22,7 +22,6 @@
  */
 #include <math.h>
 #include <stdio.h>
-#include <string.h>
 
 #include "afc_math.h"
 #include "chatter_monitor.h"
@@ -290,7 +289,7 @@ int model_initialize(ModelInstance *m, double start_time) {
 }
 
 /* the outputs are not finite: the error names the time, u, E, the inputs and the latched x(t0) */
-static int fail_outputs_overflow(ModelInstance *m, double u, const double error[], const double e[]) {
+MESSAGE_PATH static int fail_outputs_overflow(ModelInstance *m, double u, const double error[], const double e[]) {
     const InitialErrorLatch *latch = &STATE(m)->latch;
     int n = STATE(m)->p.order;
     char modified[256], inputs[256], latched[256];
@@ -305,34 +304,52 @@ static int fail_outputs_overflow(ModelInstance *m, double u, const double error[
                     numbers_text(latched, sizeof latched, latch->latched, n, "[]"));
 }
 
+/* n = 2 and m = 2, the paper's controller: the per-step path reads and writes its variables by name (the
+ * Python edition's _default_shape), any other shape through the tables of value references */
+static int default_shape(const ControllerParameters *p) { return p->order == 2 && p->sets == 2; }
+
 int model_compute_outputs(ModelInstance *m) {
     ControllerState *state = STATE(m);
-    const double *values = m->s->values;
+    double *values = m->s->values;
     const ControllerParameters *p = &state->p;
     int n = p->order, rules = p->rules;
     double e[MAX_ORDER], ym[MAX_ORDER], error[MAX_ORDER], alpha[MAX_ORDER], theta[MAX_RULES], xi[MAX_RULES];
-    for (int i = 0; i < n; i++) {
-        e[i] = values[ERROR_VR[i]];
-        ym[i] = values[REFERENCE_VR[i]];
+    if (default_shape(p)) {
+        e[0] = V(m, e), e[1] = V(m, de), ym[0] = V(m, ym), ym[1] = V(m, dym);
+        theta[0] = V(m, theta1), theta[1] = V(m, theta2), theta[2] = V(m, theta3), theta[3] = V(m, theta4);
+    } else {
+        for (int i = 0; i < n; i++) {
+            e[i] = values[ERROR_VR[i]];
+            ym[i] = values[REFERENCE_VR[i]];
+        }
+        for (int j = 0; j < rules; j++) theta[j] = values[VRS_theta[j]];
     }
     if (CURE(m, filter_time_constant) > 0.0) filter_errors(m, n, e); /* (F1), off at 0 */
-    for (int j = 0; j < rules; j++) theta[j] = values[VRS_theta[j]];
     double u = controller_output(e, ym, m->s->time, theta, V(m, w_hat), p, error, alpha, xi); /* [9] */
-    int finite = isfinite(u);
-    for (int i = 0; i < n; i++) finite = finite && isfinite(error[i]);
-    if (!finite) return fail_outputs_overflow(m, u, error, e);
+    /* u or some E^(i) is NaN or inf (or all overflow together): one test of their sum, as the Python edition's */
+    double modified_sum = 0.0;
+    for (int i = 0; i < n; i++) modified_sum += error[i];
+    if (!isfinite(u + modified_sum)) return fail_outputs_overflow(m, u, error, e);
     V(m, u) = u;
-    for (int i = 0; i < n; i++) {
-        m->s->values[MODIFIED_ERROR_VR[i]] = error[i];
-        m->s->values[VRS_alpha[i]] = alpha[i];
+    if (default_shape(p)) {
+        V(m, E) = error[0], V(m, dE) = error[1], V(m, alpha1) = alpha[0], V(m, alpha2) = alpha[1];
+        state->xi[0] = xi[0], state->xi[1] = xi[1], state->xi[2] = xi[2], state->xi[3] = xi[3];
+    } else {
+        for (int i = 0; i < n; i++) {
+            values[MODIFIED_ERROR_VR[i]] = error[i];
+            values[VRS_alpha[i]] = alpha[i];
+        }
+        for (int j = 0; j < rules; j++) state->xi[j] = xi[j];
     }
-    memcpy(state->xi, xi, sizeof(double) * (size_t)rules);
     m->outputs_stale = 0;
     return MODEL_OK;
 }
 
 #if HOST_ROBUST
 /* let the latch rule see this doStep's inputs; restart on a re-latch, warn once */
+#if defined(__GNUC__)
+__attribute__((noinline)) /* the first doSteps only: apart from the per-step path of every other */
+#endif
 static int watch_initial_error(ModelInstance *m, double time) {
     ControllerState *state = STATE(m);
     double sample[MAX_ORDER];
@@ -353,8 +370,17 @@ static int watch_initial_error(ModelInstance *m, double time) {
 }
 #endif
 
+#if HOST_ROBUST
+/* u chatters (chatter_monitor): the warning, once */
+MESSAGE_PATH static void warn_chatter(ModelInstance *m, double step_size) {
+    char message[2048];
+    chatter_warning(&STATE(m)->chatter, step_size, message, sizeof message);
+    fmu_warn(m, "%s", message);
+}
+#endif
+
 /* theta or w_hat would not be finite: the error names the step, tau and E; nothing changes */
-static int fail_adaptation_diverged(ModelInstance *m, double current_time, double step_size, double tau,
+MESSAGE_PATH static int fail_adaptation_diverged(ModelInstance *m, double current_time, double step_size, double tau,
                                     const double error[]) {
     char modified[256];
     return fmu_fail(m, "adaptation diverged in doStep(t=%.17g, h=%.17g): tau = %.17g from E = %s; theta and w_hat "
@@ -362,17 +388,27 @@ static int fail_adaptation_diverged(ModelInstance *m, double current_time, doubl
                     step_size, tau, numbers_text(modified, sizeof modified, error, STATE(m)->p.order, "()"));
 }
 
-int model_step(ModelInstance *m, double current_time, double step_size) {
-    ControllerState *state = STATE(m);
-#if HOST_ROBUST
-    if (state->latch.open != 0.0 && watch_initial_error(m, current_time) != MODEL_OK) return MODEL_ERROR;
+#if defined(__GNUC__)
+#define SHAPE_INLINE inline __attribute__((always_inline))
+#else
+#define SHAPE_INLINE inline
 #endif
+
+/* the adaptive law's step [31] from the latched state; `paper_shape` (a constant where it is inlined): n = 2,
+ * m = 2 (default_shape), so that the loops over the 4 rules are unrolled and the variables read by name */
+static SHAPE_INLINE int adapt(ModelInstance *m, double current_time, double step_size, const int paper_shape) {
+    ControllerState *state = STATE(m);
     double *values = m->s->values;
     const ControllerParameters *p = &state->p;
-    int n = p->order, rules = p->rules;
+    int n = paper_shape ? 2 : p->order, rules = paper_shape ? 4 : p->rules;
     double error[MAX_ORDER], theta[MAX_RULES], adapted[MAX_RULES];
-    for (int i = 0; i < n; i++) error[i] = values[MODIFIED_ERROR_VR[i]];
-    for (int j = 0; j < rules; j++) theta[j] = values[VRS_theta[j]];
+    if (paper_shape) {
+        error[0] = V(m, E), error[1] = V(m, dE);
+        theta[0] = V(m, theta1), theta[1] = V(m, theta2), theta[2] = V(m, theta3), theta[3] = V(m, theta4);
+    } else {
+        for (int i = 0; i < n; i++) error[i] = values[MODIFIED_ERROR_VR[i]];
+        for (int j = 0; j < rules; j++) theta[j] = values[VRS_theta[j]];
+    }
     double tau = adaptation_signal(n, error, p->p_b); /* [31] */
     double w_hat = V(m, w_hat);
     if (CURE(m, dead_zone) > 0.0) tau = dead_zone_signal(tau, CURE(m, dead_zone)); /* (31a), off at 0 */
@@ -382,20 +418,29 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
         adapted_weights(rules, theta, tau, state->xi, V(m, gamma), V(m, m_theta), V(m, delta), step_size, adapted);
         if (p->variant == VARIANT_FAE) w_hat += step_size * V(m, gamma_w) * tau;
     }
-    int finite = 1;
-    for (int j = 0; j < rules; j++) finite = finite && isfinite(adapted[j]);
-    if (!(finite && isfinite(w_hat))) return fail_adaptation_diverged(m, current_time, step_size, tau, error);
-    for (int j = 0; j < rules; j++) values[VRS_theta[j]] = adapted[j];
+    /* some theta or w_hat is NaN or inf (or all overflow together): one test of their sum, as the Python edition's */
+    double theta_sum = 0.0;
+    for (int j = 0; j < rules; j++) theta_sum += adapted[j];
+    if (!isfinite(w_hat + theta_sum)) return fail_adaptation_diverged(m, current_time, step_size, tau, error);
+    if (paper_shape) {
+        V(m, theta1) = adapted[0], V(m, theta2) = adapted[1], V(m, theta3) = adapted[2], V(m, theta4) = adapted[3];
+    } else {
+        for (int j = 0; j < rules; j++) values[VRS_theta[j]] = adapted[j];
+    }
     V(m, w_hat) = w_hat;
     if (CURE(m, filter_time_constant) > 0.0) commit_filter(m, n, current_time); /* (F1) */
 #if HOST_ROBUST
-    if (chatter_update(&state->chatter, V(m, u), step_size)) {
-        char message[2048];
-        chatter_warning(&state->chatter, step_size, message, sizeof message);
-        fmu_warn(m, "%s", message);
-    }
+    if (chatter_update(&state->chatter, V(m, u), step_size)) warn_chatter(m, step_size);
 #endif
     return MODEL_OK;
+}
+
+int model_step(ModelInstance *m, double current_time, double step_size) {
+    ControllerState *state = STATE(m);
+#if HOST_ROBUST
+    if (state->latch.open != 0.0 && watch_initial_error(m, current_time) != MODEL_OK) return MODEL_ERROR;
+#endif
+    return default_shape(&state->p) ? adapt(m, current_time, step_size, 1) : adapt(m, current_time, step_size, 0);
 }
 
 /* ---------------------------------------------------------------- model exchange */

@@ -112,9 +112,15 @@ void membership_boundaries(double universe, int sets, double boundaries[]) {
     for (int l = 1; l < sets; l++) boundaries[l - 1] = -universe + 2.0 * universe * l / sets;
 }
 
-/* mu_1 = sig(s (c_1 - z)), mu_l = sig(s (z - c_(l-1))) - sig(s (z - c_l)), mu_m = sig(s (z - c_(m-1))) */
+/* mu_1 = sig(s (c_1 - z)), mu_l = sig(s (z - c_(l-1))) - sig(s (z - c_l)), mu_m = sig(s (z - c_(m-1)));
+ * m = 2 as Python's pair (sig(s (c_1 - z)), sig(s (z - c_1))) */
 void memberships(int sets, double z, double slope, const double boundaries[], double mu[]) {
     double first = boundaries[0];
+    if (sets == 2) {
+        mu[0] = sigmoid(slope * (first - z));
+        mu[1] = sigmoid(slope * (z - first));
+        return;
+    }
     mu[0] = sigmoid(slope * (first - z));
     double previous = sigmoid(slope * (z - first));
     for (int l = 1; l + 1 < sets; l++) {
@@ -125,10 +131,17 @@ void memberships(int sets, double z, double slope, const double boundaries[], do
     mu[sets - 1] = previous;
 }
 
-/* [8]: xi = mu(z_1) (x) mu(z_2) (x) ..., the products left to right (Python's n = 2 paths are
- * the same products) */
+/* [8]: xi = mu(z_1) (x) mu(z_2) (x) ..., the products left to right; n = 2, m = 2 unrolled as Python's
+ * four rules (the same products) */
 int fuzzy_basis(int n, int sets, const double z[], double slope, const double boundaries[][MAX_BOUNDARIES],
                 double xi[]) {
+    if (n == 2 && sets == 2) {
+        double mu1[2], mu2[2];
+        memberships(2, z[0], slope, boundaries[0], mu1);
+        memberships(2, z[1], slope, boundaries[1], mu2);
+        xi[0] = mu1[0] * mu2[0], xi[1] = mu1[0] * mu2[1], xi[2] = mu1[1] * mu2[0], xi[3] = mu1[1] * mu2[1];
+        return 4;
+    }
     memberships(sets, z[0], slope, boundaries[0], xi);
     int count = sets;
     for (int i = 1; i < n; i++) {
@@ -169,6 +182,14 @@ void remark3_polynomials(int n, const double coefficients[], double polynomials[
  * ((0 t + a1) t + a0) e^(-lambda_e t), ((0 t + b1) - lambda_e ((0 t + a1) t + a0)) e^(-lambda_e t) */
 void remark3_offset(int n, const double polynomials[][MAX_ORDER], double elapsed, double lambda_e, double offsets[]) {
     double t = elapsed;
+    if (n == 2) { /* unrolled as Python's n = 2 path (the same arithmetic as the loops below) */
+        double a1 = polynomials[0][0], a0 = polynomials[0][1], b1 = polynomials[1][0];
+        double value = (0.0 * t + a1) * t + a0;
+        double decay = exp(-lambda_e * t);
+        offsets[0] = value * decay;
+        offsets[1] = ((0.0 * t + b1) - lambda_e * value) * decay;
+        return;
+    }
     double values[MAX_ORDER]; /* p^(j)(t), j = 0..n-1 */
     for (int j = 0; j < n; j++) {
         double acc = 0.0;
@@ -198,6 +219,10 @@ void modified_error(int n, const double error[], double t, const double error0[]
     }
     double offsets[MAX_ORDER];
     remark3_offset(n, polynomials, t - t0, lambda_e, offsets);
+    if (n == 2) { /* unrolled as Python */
+        modified[0] = error[0] - offsets[0], modified[1] = error[1] - offsets[1];
+        return;
+    }
     for (int i = 0; i < n; i++) modified[i] = error[i] - offsets[i];
 }
 
@@ -274,14 +299,26 @@ void fls_inputs(int n, const double error[], const double reference[], const dou
         for (int i = 0; i < n; i++) x[i] = reference[i] - error[i];
         return;
     }
+    if (n == 2) { /* Python returns the modified error itself */
+        x[0] = modified[0], x[1] = modified[1];
+        return;
+    }
     for (int i = 0; i < n; i++) x[i] = modified[i];
 }
 
 void contraction_factors(int n, const double x[], double lambda_ce, const double kappa[], double alpha[]) {
+    if (n == 2) { /* unrolled as Python */
+        alpha[0] = contraction_factor(x[0], lambda_ce, kappa[0]), alpha[1] = contraction_factor(x[1], lambda_ce, kappa[1]);
+        return;
+    }
     for (int i = 0; i < n; i++) alpha[i] = contraction_factor(x[i], lambda_ce, kappa[i]);
 }
 
 void normalized_inputs(int n, const double x[], const double alpha[], const double universe[], double z[]) {
+    if (n == 2) { /* unrolled as Python */
+        z[0] = normalized_input(x[0], alpha[0], universe[0]), z[1] = normalized_input(x[1], alpha[1], universe[1]);
+        return;
+    }
     for (int i = 0; i < n; i++) z[i] = normalized_input(x[i], alpha[i], universe[i]);
 }
 

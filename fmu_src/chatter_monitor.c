@@ -9,10 +9,18 @@
 
 void chatter_start(ChatterMonitor *state) { memset(state, 0, sizeof *state); }
 
-double chatter_frequency(const ChatterMonitor *state) {
-    double magnitude = state->magnitude >= CHATTER_U_FLOOR ? state->magnitude : CHATTER_U_FLOOR;
-    return state->variation_rate / magnitude / (2.0 * PI);
+static double floored_magnitude(const ChatterMonitor *state) {
+    return state->magnitude >= CHATTER_U_FLOOR ? state->magnitude : CHATTER_U_FLOOR;
 }
+
+double chatter_frequency(const ChatterMonitor *state) {
+    return state->variation_rate / floored_magnitude(state) / (2.0 * PI);
+}
+
+/* f > CHATTER_THRESHOLD_HZ needs variation_rate > CHATTER_THRESHOLD_HZ 2 pi magnitude up to the few
+ * roundings (relative 1e-16 each) of f's two divisions: below this line, a relative 1e-9 under it, f is
+ * below the threshold without dividing (the same verdict as chatter_monitor.update's; NaN is not below) */
+#define CHATTER_CLEAR_BELOW (CHATTER_THRESHOLD_HZ * (2.0 * PI) * (1.0 - 1e-9))
 
 int chatter_update(ChatterMonitor *state, double u, double step_size) {
     if (!(step_size > 0.0)) return 0;
@@ -28,6 +36,7 @@ int chatter_update(ChatterMonitor *state, double u, double step_size) {
     state->previous_u = u;
     state->elapsed += step_size;
     if (state->warned != 0.0 || state->elapsed < CHATTER_WARMUP) return 0;
+    if (state->variation_rate < CHATTER_CLEAR_BELOW * floored_magnitude(state)) return 0;
     if (chatter_frequency(state) > CHATTER_THRESHOLD_HZ) {
         state->warned = 1.0;
         return 1;

@@ -256,34 +256,40 @@ static int refresh_outputs(ModelInstance *m) {
  * FMU's own time (where the last step ended, or the time of a restored state; 1e-9 relative) and
  * a step >= 0; a refused doStep changes nothing and returns Discard (the wording and rules of
  * afc_slave_base.TableSlave._refuse_step) */
-static Status do_step(ModelInstance *m, double current_time, double step_size, const char *call) {
+static int step_allowed(const ModelInstance *m, double current_time, double step_size) {
     double time = m->s->time;
+    return m->mode == MODE_STEP && step_size >= 0.0 && fabs(current_time - time) <= 1e-9 * (fabs(time) + step_size);
+}
+
+/* the message of a doStep step_allowed refuses */
+MESSAGE_PATH static Status refuse_step(ModelInstance *m, double current_time, double step_size, const char *call) {
+    const char *rule;
+    char expected[256];
+    if (m->mode == MODE_TERMINATED)
+        rule = "the FMU was terminated (" TERMINATE_CALL "); doStep is allowed only between "
+               EXIT_INIT_CALL " and " TERMINATE_CALL;
+    else if (m->mode != MODE_STEP)
+        rule = "the FMU is not initialised: call " EXIT_INIT_CALL " first; doStep is allowed only "
+               "between " EXIT_INIT_CALL " and " TERMINATE_CALL;
+    else if (!(step_size >= 0.0))
+        rule = "the communication step must be >= 0";
+    else {
+        snprintf(expected, sizeof expected, "expected currentCommunicationPoint = %.17g, the FMU's time "
+                 "(where the last step ended, or the time of the state restored by " SET_STATE_CALL "); a step "
+                 "must start there", m->s->time);
+        rule = expected;
+    }
+    fmu_fail(m, "%s(currentCommunicationPoint = %.17g, communicationStepSize = %.17g) refused: %s; state and "
+             "time unchanged", call, current_time, step_size, rule);
+    return STATUS_DISCARD;
+}
+
+static Status do_step(ModelInstance *m, double current_time, double step_size, const char *call) {
     if (m->model_exchange) {
         fmu_fail(m, "%s is a co-simulation function; this instance was instantiated for model exchange", call);
         return STATUS_ERROR;
     }
-    if (!(m->mode == MODE_STEP && step_size >= 0.0 &&
-          fabs(current_time - time) <= 1e-9 * (fabs(time) + step_size))) {
-        const char *rule;
-        char expected[256];
-        if (m->mode == MODE_TERMINATED)
-            rule = "the FMU was terminated (" TERMINATE_CALL "); doStep is allowed only between "
-                   EXIT_INIT_CALL " and " TERMINATE_CALL;
-        else if (m->mode != MODE_STEP)
-            rule = "the FMU is not initialised: call " EXIT_INIT_CALL " first; doStep is allowed only "
-                   "between " EXIT_INIT_CALL " and " TERMINATE_CALL;
-        else if (!(step_size >= 0.0))
-            rule = "the communication step must be >= 0";
-        else {
-            snprintf(expected, sizeof expected, "expected currentCommunicationPoint = %.17g, the FMU's time "
-                     "(where the last step ended, or the time of the state restored by " SET_STATE_CALL "); a step "
-                     "must start there", time);
-            rule = expected;
-        }
-        fmu_fail(m, "%s(currentCommunicationPoint = %.17g, communicationStepSize = %.17g) refused: %s; state and "
-                 "time unchanged", call, current_time, step_size, rule);
-        return STATUS_DISCARD;
-    }
+    if (!step_allowed(m, current_time, step_size)) return refuse_step(m, current_time, step_size, call);
     if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return STATUS_ERROR;
     if (model_step(m, current_time, step_size) != MODEL_OK) return STATUS_ERROR;
     m->s->time = current_time + step_size;
@@ -348,6 +354,25 @@ static Status get_values(ModelInstance *m, const unsigned *vr, size_t n, double 
     return STATUS_OK;
 }
 
+/* fmi2GetReal / fmi3GetFloat64.  The per-step path: an initialised instance (a mode between
+ * exitInitializationMode and terminate: set_state leaves those modes for a state not initialised) reads
+ * Reals of the table after its outputs are brought up to date; anything else (another state, time, a
+ * derivative, an Integer, a value reference out of range) goes to get_values, which checks each and says
+ * what is wrong. */
+static Status get_reals(ModelInstance *m, const unsigned *vr, size_t n, double *real, const char *call) {
+    if (m && (m->mode & INITIALIZED_MODES)) {
+        if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return STATUS_ERROR;
+        const double *values = m->s->values;
+        size_t i = 0;
+        while (i < n && vr[i] < (unsigned)N_VARIABLES && !MODEL_VARIABLES[vr[i]].is_integer) {
+            real[i] = values[vr[i]];
+            i++;
+        }
+        if (i == n) return STATUS_OK;
+    }
+    return get_values(m, vr, n, real, NULL, call);
+}
+
 /* TableSlave._reject plus the fixed-parameter rule */
 /* TableSlave._reject: outputs are never set; after terminate nothing; parameters (variability
  * fixed) only before exitInitializationMode; NaN and inf never */
@@ -407,6 +432,25 @@ static Status set_values(ModelInstance *m, const unsigned *vr, size_t n, const d
     }
     if (m->stale_on_set || integer) m->outputs_stale = 1;
     return status;
+}
+
+/* fmi2SetReal / fmi3SetFloat64.  The per-step path: finite values of Real inputs, before terminate (what
+ * settable() allows them); anything else goes to set_values, which checks each and refuses what it must. */
+static Status set_reals(ModelInstance *m, const unsigned *vr, size_t n, const double *real, const char *call) {
+    if (m && m->mode != MODE_TERMINATED) {
+        double *values = m->s->values;
+        size_t i = 0;
+        while (i < n && vr[i] < (unsigned)N_VARIABLES && MODEL_VARIABLES[vr[i]].causality == CAUSALITY_INPUT &&
+               !MODEL_VARIABLES[vr[i]].is_integer && isfinite(real[i])) {
+            values[vr[i]] = real[i];
+            i++;
+        }
+        if (i == n) {
+            if (m->stale_on_set) m->outputs_stale = 1;
+            return STATUS_OK;
+        }
+    }
+    return set_values(m, vr, n, real, NULL, call);
 }
 
 static Status no_variables_of_type(ModelInstance *m, size_t n, const char *call) {
@@ -689,7 +733,7 @@ fmi2Status fmi2Reset(fmi2Component c) {
 }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
-    return get_values(M, vr, nvr, value, NULL, "fmi2GetReal");
+    return get_reals(M, vr, nvr, value, "fmi2GetReal");
 }
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
@@ -707,7 +751,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
-    return set_values(M, vr, nvr, value, NULL, "fmi2SetReal");
+    return set_reals(M, vr, nvr, value, "fmi2SetReal");
 }
 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
@@ -957,7 +1001,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
         fmu_fail(M, "fmi3GetFloat64: %zu values for %zu value references", nValues, nValueReferences);
         return fmi3Error;
     }
-    return get_values(M, valueReferences, nValueReferences, values, NULL, "fmi3GetFloat64");
+    return get_reals(M, valueReferences, nValueReferences, values, "fmi3GetFloat64");
 }
 
 fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
@@ -975,7 +1019,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
         fmu_fail(M, "fmi3SetFloat64: %zu values for %zu value references", nValues, nValueReferences);
         return fmi3Error;
     }
-    return set_values(M, valueReferences, nValueReferences, values, NULL, "fmi3SetFloat64");
+    return set_reals(M, valueReferences, nValueReferences, values, "fmi3SetFloat64");
 }
 
 fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,

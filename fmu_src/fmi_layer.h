@@ -111,6 +111,14 @@ int model_update_discrete_states(ModelInstance *m, int *states_changed);
 int model_next_event_time(ModelInstance *m, double *time);
 #endif
 
+/* A function that only builds and logs a message (a failure, a warning): compiled apart from its caller,
+ * so that the caller's per-step path carries none of its buffers. */
+#if defined(__GNUC__)
+#define MESSAGE_PATH __attribute__((noinline, cold))
+#else
+#define MESSAGE_PATH
+#endif
+
 /* ---- provided by the layer ---- */
 /* log message with status Error ("<instance>: message"), return MODEL_ERROR (TableSlave.fail) */
 int fmu_fail(ModelInstance *m, const char *format, ...)

@@ -92,6 +92,7 @@ enum {
     LOOP_INDICATORS_FAILED = 9,  /* GetEventIndicators of block `index` */
     LOOP_SOLVER_FAILED = 10,     /* CVode (or CVodeGetDky) returned `status` < 0 */
     LOOP_EVENT = 11,             /* a step ended at `time` with an event for the master (`status`: CVode's flag) */
+    LOOP_OUT_OF_MEMORY = 12,     /* the loop could not allocate its working memory (nothing was run) */
 };
 
 typedef struct {
@@ -154,8 +155,9 @@ static inline int loop_stop(Outcome *outcome, int32_t what, int64_t index, int32
 }
 
 /* One pass of the plan (Master._propagate): each read, and each write after every value it copies is
- * checked against its bound, !(-bound < value < bound) also for NaN, so no FMU is handed a runaway
- * input.  LOOP_DONE, or what stopped it (outcome, index, status; copy and value for a divergence). */
+ * checked against its bound, !(-bound < value < bound) also for NaN (tested as !(|value| < bound), the
+ * same for every bound), so no FMU is handed a runaway input.  LOOP_DONE, or what stopped it (outcome,
+ * index, status; copy and value for a divergence). */
 static inline int run_plan(const Action *plan, size_t actions, Outcome *outcome) {
     for (size_t i = 0; i < actions; i++) {
         const Action *a = &plan[i];
@@ -166,8 +168,7 @@ static inline int run_plan(const Action *plan, size_t actions, Outcome *outcome)
         }
         for (size_t k = 0; k < a->count; k++) {
             double value = a->sources[k][a->source_index[k]];
-            double bound = a->bounds[k];
-            if (!(-bound < value && value < bound)) {
+            if (!(fabs(value) < a->bounds[k])) {
                 outcome->copy = (int64_t)k;
                 outcome->value = value;
                 return loop_stop(outcome, LOOP_WRITE_DIVERGED, (int64_t)i, 0);

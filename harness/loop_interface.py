@@ -31,6 +31,7 @@ class LoopOutcome(enum.IntEnum):
     INDICATORS_FAILED = 9
     SOLVER_FAILED = 10
     EVENT = 11
+    OUT_OF_MEMORY = 12
 
 
 #: the FMI function each failure names (FMI 2.0 names; an FMI 3.0 instance reports its own)

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import atomic_files, compiled_loop, master_loop
+from . import atomic_files, compiled_loop, master_loop, progress as progress_display
 from .fmi import BoundArrayCall, Component, FmiError, ModelInfo
 from .loop_interface import FAILED_FUNCTIONS, LoopOutcome
 from .scenario import Scenario, ScenarioError
@@ -33,6 +33,10 @@ from .scenario_checks import model_info, resolve_fmu, validate
 ALGORITHMS = ("feedthrough", "jacobi")
 FMI_WARNING = 1
 DIVERGENCE_CHECK_EVERY = 64  # rows; a non-finite value set on an FMU is caught at once
+#: the compiled loop with a progress callback and no progress_every: its first block (rows), then blocks
+#: that last about one tick of the progress display's clock (the count it shows is never older)
+FIRST_PROGRESS_BLOCK = 1024
+PROGRESS_BLOCK_S = progress_display.CLOCK_TICK_S
 
 
 class Divergence(RuntimeError):
@@ -58,6 +62,7 @@ class RunResult:
     wall_s: float
     complete: bool
     loop_s: float = float("nan")  # the fixed-step loop alone (no instantiation, initialisation, clean-up)
+    loop_cpu_s: float = float("nan")  # the same, in CPU time of the thread that ran it (what load cannot add to)
     solver: dict | None = None  # --algorithm me: the integrator's statistics (harness/me_master.py)
 
     @property
@@ -79,6 +84,11 @@ class RunResult:
         """Microseconds per communication step of the loop (whole run if it stopped early)."""
         seconds = self.loop_s if self.loop_s == self.loop_s else self.wall_s
         return 1e6 * seconds / max(self.rows - 1, 1)
+
+    @property
+    def cpu_us_per_step(self) -> float:
+        """Microseconds of the loop thread's CPU time per communication step (NaN if the run stopped early)."""
+        return 1e6 * self.loop_cpu_s / max(self.rows - 1, 1)
 
     def write_csv(self, path, output_interval: float | None = None) -> Path:
         """FMI cross-check style: time first, quoted ``instance.variable`` header; written whole or not at all
@@ -273,7 +283,7 @@ class Master:
         unit, count = self._progress_units()
         if isinstance(progress_every, bool) or not isinstance(progress_every, int) or progress_every < 0:
             raise ValueError(f"progress_every = {progress_every!r}: a whole number of {unit} >= 0 "
-                             f"(0: {unit} // 200)")
+                             f"(0: {self._default_progress_text(unit)})")
         scenario = self.scenario
         steps, start = scenario.steps, scenario.start
         stop = start + steps * scenario.step
@@ -293,12 +303,12 @@ class Master:
             plan = self._initialise(plan)
             record = np.empty((steps + 1, len(self.plan_columns)))
             self._before_loop(plan, record)
-            loop_start, loop_cpu = clock.perf_counter(), clock.thread_time()
-            self._loop(plan, record, progress, progress_every or max(1, count // 200))
-            self._check_bound(record, max(0, self.rows_done - DIVERGENCE_CHECK_EVERY - 1), self.rows_done,
-                              self.column_bounds)
+            loop_start, loop_cpu_start = clock.perf_counter(), clock.thread_time()
+            if not self._loop(plan, record, progress, progress_every):  # the last rows, unless the loop checked them
+                self._check_bound(record, max(0, self.rows_done - DIVERGENCE_CHECK_EVERY - 1), self.rows_done,
+                                  self.column_bounds)
             self.loop_s = clock.perf_counter() - loop_start
-            self.loop_cpu_s = clock.thread_time() - loop_cpu  # this thread's CPU time in the loop
+            self.loop_cpu_s = clock.thread_time() - loop_cpu_start
             if progress is not None:
                 progress(steps, steps)
         except self.RUN_ERRORS as error:
@@ -318,6 +328,11 @@ class Master:
         """(what progress counts, how many of them a run has)."""
         return "steps", self.scenario.steps
 
+    @staticmethod
+    def _default_progress_text(unit: str) -> str:
+        """What ``progress_every = 0`` means, for the message of a bad value."""
+        return f"about every {PROGRESS_BLOCK_S:g} s with the compiled loop, every {unit} // 200 with the Python loop"
+
     def _begin_run(self):
         """Per-run state set before anything is instantiated."""
 
@@ -335,22 +350,33 @@ class Master:
         return plan
 
     def _before_loop(self, plan: list, record):
-        """What the loop needs made before it is timed (nothing for the fixed-step loop)."""
+        """What the loop needs made before it is timed: the record's memory touched (its pages are the
+        system's to map before the first row is written, not during the loop) and the compiled loop's plan
+        (harness/master_loop.py)."""
+        record.fill(0.0)
+        self._compiled = None
+        if self._compiled_loop is not None:
+            self._compiled = master_loop.CompiledLoop(self._compiled_loop, plan, list(self.components.values()),
+                                                      record, self.column_bounds, DIVERGENCE_CHECK_EVERY)
 
-    def _loop(self, plan: list, record, progress, every: int):
-        """Rows 0 .. steps: the fixed-step loop (compiled or Python), then the last communication point."""
+    def _loop(self, plan: list, record, progress, every: int) -> bool:
+        """Rows 0 .. steps: the fixed-step loop (compiled or Python), then the last communication point.
+        ``every``: rows between progress calls (0: the loop's own choice).  True when the loop checked the
+        last rows against their bounds itself (the compiled loop does)."""
         scenario = self.scenario
         steps = scenario.steps
-        if self._compiled_loop is None:
-            self._loop_python(plan, record, progress, every)
-        else:
-            self._loop_compiled(self._compiled_loop, plan, record, progress, every)
+        if self._compiled is not None:  # the last block's call ends with the last communication point
+            self._loop_compiled(self._compiled, plan, record, progress, every)
+            self.rows_done = steps + 1
+            return True
+        self._loop_python(plan, record, progress, every)
         self._propagate(plan, scenario.start + steps * scenario.step)
         row = record[steps]
         for action in plan:
             if action.copies is None and action.recorded:
                 row[action.first_column:action.first_column + action.recorded] = action.view[:action.recorded]
         self.rows_done = steps + 1
+        return False
 
     def _release_components(self, completed: bool):
         """After a run, whether it ``completed`` or not: every FMU freed (a master that reuses its
@@ -370,6 +396,7 @@ class Master:
                  for a in plan if a.copies is None and a.recorded]
         steppers = [(component, component.stepper()) for component in self.components.values()]
         bound = self.column_bounds
+        every = every or max(1, steps // 200)
         rows_done = 0
         try:
             for n in range(steps):
@@ -390,22 +417,32 @@ class Master:
         finally:
             self.rows_done = rows_done  # for the partial result, if something stopped the loop
 
-    def _loop_compiled(self, library, plan: list, record, progress, every: int):
-        """The same rows by harness/master_loop.c, in blocks of ``every`` rows (the progress
-        interval); whatever stops it is raised here as _loop_python raises it."""
+    def _loop_compiled(self, loop, plan: list, record, progress, every: int):
+        """The same rows by harness/master_loop.c, which checks every bound itself: all of them in one
+        call when no one follows the progress; else in blocks of ``every`` rows (the caller's progress
+        interval) or, with ``every`` 0, in blocks of about PROGRESS_BLOCK_S of wall time each (sized
+        from the rows per second of the blocks before), with a progress call after each.  Whatever
+        stops it is raised here as _loop_python raises it."""
         scenario = self.scenario
         steps, step, start = scenario.steps, scenario.step, scenario.start
         components = list(self.components.values())
-        loop = master_loop.CompiledLoop(library, plan, components, record, self.column_bounds,
-                                        DIVERGENCE_CHECK_EVERY)
-        n = 0
+        n, block = 0, FIRST_PROGRESS_BLOCK
         while n < steps:
-            last = min(steps, (n // every + 1) * every)
-            outcome = loop.run(start, step, n, last)
+            if progress is None:
+                last = steps
+            elif every:
+                last = min(steps, (n // every + 1) * every)
+            else:
+                last = min(steps, n + block)
+            began = clock.perf_counter()
+            outcome = loop.run(start, step, n, last, steps)
             if outcome.outcome != LoopOutcome.DONE:
                 self._raise_stop(outcome, plan, components, record)
+            if progress is not None and not every:
+                rows_per_s = (last - n) / max(clock.perf_counter() - began, 1e-9)
+                block = max(1, int(rows_per_s * PROGRESS_BLOCK_S))
             self.rows_done = n = last
-            if progress is not None and n % every == 0:
+            if progress is not None and (not every or n % every == 0):
                 progress(n, steps)
 
     def _raise_stop(self, outcome, plan: list, components: list, record):
@@ -414,13 +451,16 @@ class Master:
         t = self.scenario.start + row * self.scenario.step
         kind = outcome.outcome
         self.rows_done = row  # the row's reads and writes are not complete
+        if kind == LoopOutcome.OUT_OF_MEMORY:
+            raise MemoryError(f"the compiled master loop could not allocate its working memory at row {row}")
         if kind == LoopOutcome.WRITE_DIVERGED:
             self._diverged_on_write(plan[outcome.index], outcome.copy, outcome.value, t)
         if kind in (LoopOutcome.READ_FAILED, LoopOutcome.WRITE_FAILED):
             plan[outcome.index].component.fail(FAILED_FUNCTIONS[kind], outcome.status, t)
         self.rows_done = row + 1  # the row is recorded
         if kind == LoopOutcome.RECORD_DIVERGED:
-            self._check_bound(record, self.rows_done - DIVERGENCE_CHECK_EVERY, self.rows_done, self.column_bounds)
+            self._check_bound(record, max(0, self.rows_done - DIVERGENCE_CHECK_EVERY), self.rows_done,
+                              self.column_bounds)
         if kind == LoopOutcome.STEP_FAILED:
             components[outcome.index].fail(FAILED_FUNCTIONS[kind], outcome.status, t)
         raise RuntimeError(f"the compiled master loop stopped at row {row} for no reason the Python loop "
@@ -446,7 +486,8 @@ class Master:
             values = record[:rows] if order == list(range(len(order))) else record[:rows][:, np.asarray(order)]
         time = scenario.start + np.arange(rows) * scenario.step
         return RunResult(scenario, self.algorithm, time, list(scenario.record), values, wall_s, complete,
-                         getattr(self, "loop_s", float("nan")) if complete else float("nan"))
+                         getattr(self, "loop_s", float("nan")) if complete else float("nan"),
+                         getattr(self, "loop_cpu_s", float("nan")) if complete else float("nan"))
 
 
 def simulate(scenario: Scenario, algorithm: str = "feedthrough", fmu_paths: dict | None = None,

@@ -28,8 +28,12 @@ def _declare(library):
     function = library.master_loop_run
     function.restype = ctypes.c_int
     function.argtypes = [ctypes.POINTER(Action), ctypes.c_size_t, ctypes.POINTER(Stepper), ctypes.c_size_t,
-                         ctypes.c_double, ctypes.c_double, ctypes.c_int64, ctypes.c_int64, _double_p,
+                         ctypes.c_double, ctypes.c_double, ctypes.c_int64, ctypes.c_int64, ctypes.c_int64, _double_p,
                          ctypes.c_size_t, _double_p, ctypes.c_int64, ctypes.POINTER(Outcome)]
+    finish = library.master_loop_finish
+    finish.restype = ctypes.c_int
+    finish.argtypes = [ctypes.POINTER(Action), ctypes.c_size_t, ctypes.c_int64, _double_p, ctypes.c_size_t, _double_p,
+                       ctypes.c_int64, ctypes.POINTER(Outcome)]
 
 
 LIBRARY = CompiledLibrary("master_loop", SOURCE, "the master", _declare)
@@ -45,7 +49,7 @@ class CompiledLoop:
     """A plan of harness.master (its _Read and _Write actions) and steppers, ready for master_loop_run."""
 
     def __init__(self, library, plan: list, components: list, record, column_bounds, check_every: int):
-        self.function = library.master_loop_run
+        self.function, self.finishing = library.master_loop_run, library.master_loop_finish
         self.plan = plan
         self.components = components
         self.record = record
@@ -58,16 +62,25 @@ class CompiledLoop:
         if not (record.flags.c_contiguous and record.dtype == "float64"):
             raise ValueError("the record must be a C-contiguous float64 array")
         self.column_bounds = (ctypes.c_double * len(column_bounds))(*column_bounds)
+        self._record, self._bounds = record.ctypes.data_as(_double_p), ctypes.cast(self.column_bounds, _double_p)
         self.actions, self.steppers = actions, steppers
         self.columns = record.shape[1]
         self.check_every = check_every
         self.outcome = Outcome()
 
-    def run(self, start: float, step: float, first_row: int, last_row: int) -> Outcome:
-        """Rows first_row .. last_row - 1; the Outcome says whether all ran or what stopped them."""
+    def run(self, start: float, step: float, first_row: int, last_row: int, steps: int = -1) -> Outcome:
+        """Rows first_row .. last_row - 1, and the last communication point too when last_row is ``steps``; the
+        Outcome says whether all ran or what stopped them."""
         self.function(self.actions, len(self.actions), self.steppers, len(self.steppers), start, step,
-                      first_row, last_row, self.record.ctypes.data_as(_double_p), self.columns,
-                      ctypes.cast(self.column_bounds, _double_p), self.check_every, ctypes.byref(self.outcome))
+                      first_row, last_row, steps, self._record, self.columns, self._bounds, self.check_every,
+                      ctypes.byref(self.outcome))
+        return self.outcome
+
+    def finish(self, steps: int) -> Outcome:
+        """Row ``steps`` (the last communication point, no doStep) and the check of the rows after the last
+        block check."""
+        self.finishing(self.actions, len(self.actions), steps, self._record, self.columns, self._bounds,
+                       self.check_every, ctypes.byref(self.outcome))
         return self.outcome
 
 

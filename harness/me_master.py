@@ -239,9 +239,15 @@ class ModelExchangeMaster(Master):
             compiled.attach(self.solver)
         self._compiled = compiled
 
+    @staticmethod
+    def _default_progress_text(unit: str) -> str:
+        return f"{unit} // 200"
+
     def _loop(self, plan: list, record, progress, every: int):
-        """Row 0 at the start, then rows 1 .. rows - 1 by the integration."""
+        """Row 0 at the start, then rows 1 .. rows - 1 by the integration (a progress call every ``every``
+        rows; 0: rows // 200)."""
         scenario = self.scenario
+        every = every or max(1, self._progress_units()[1] // 200)
         self._record_row(plan, record, 0, scenario.start, self.x)
         self.rows_done = 1
         self._integrate(plan, self._compiled, record, self._next_time, scenario.start + scenario.steps * scenario.step,

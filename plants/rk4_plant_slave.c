@@ -15,11 +15,11 @@ int model_initialize(ModelInstance *m, double start_time) {
     PlantState *state = PLANT(m);
     for (int s = 0; s < PLANT_STATES; s++) state->x[s] = m->s->values[VRS_x_start[s]];
     state->mode = 0.0;
+    plant_params(m, state->params);
+    state->split = rk4_split(0.0, V(m, max_internal_step));
 #if PLANT_HAS_EVENTS /* the mode of the initial state (model exchange; co-simulation has none) */
-    double params[PLANT_MAX_PARAMS];
     int changed = 0;
-    plant_params(m, params);
-    state->mode = plant_mode_update(m, params, 0.0, state->x, &changed);
+    state->mode = plant_mode_update(m, state->params, 0.0, state->x, &changed);
 #endif
     return MODEL_OK;
 }
@@ -27,14 +27,13 @@ int model_initialize(ModelInstance *m, double start_time) {
 void model_construct(ModelInstance *m) { model_initialize(m, m->s->start_time); }
 
 int model_step(ModelInstance *m, double current_time, double step_size) {
-    double params[PLANT_MAX_PARAMS];
     PlantState *state = PLANT(m);
     double x[PLANT_STATES];
     int finite = 1;
     for (int s = 0; s < PLANT_STATES; s++) x[s] = state->x[s];
-    plant_params(m, params);
-    rk4_advance_states(plant_derivative, current_time, x, PLANT_STATES, V(m, u), step_size,
-                       V(m, max_internal_step), params);
+    if (state->split.step_size != step_size || state->split.max_internal_step != V(m, max_internal_step))
+        state->split = rk4_split(step_size, V(m, max_internal_step));
+    plant_advance(current_time, x, V(m, u), &state->split, state->params);
     for (int s = 0; s < PLANT_STATES; s++) finite = finite && x[s] - x[s] == 0.0; /* not NaN or inf */
     if (!finite) {
         char start[512];

@@ -585,3 +585,20 @@ def test_the_control_law_with_a_floor_on_alpha_is_the_python_one(afc):
         expected = afc_math.controller_output(tuple(error), tuple(reference), t, theta, 0.0, p)
         assert bits(u) == bits(expected[0]) and bits(alpha[:2]) == bits(expected[2]) and min(alpha[:2]) >= 0.2
         assert bits(xi[:4]) == bits(expected[3])
+
+
+def test_the_chatter_verdict_next_to_the_threshold_is_the_python_editions(afc):
+    """States whose statistic lies within a relative 1e-8 of 20 Hz, on both sides (where the C test first compares
+    the averages without dividing): the C twin warns exactly when chatter_monitor.update does."""
+    afc.chatter_update.restype = ctypes.c_int
+    h, u = 1e-4, 3.0  # u = the previous u = the magnitude: only the variation rate moves, by the factor 1 - h
+    line = chatter_monitor.THRESHOLD_HZ * 2.0 * math.pi * u / (1.0 - h)
+    verdicts = set()
+    for relative in np.linspace(-1e-8, 1e-8, 401):
+        python = [u, line * (1.0 + relative), u, 2.0, 1.0, 0.0]  # PREVIOUS_U, VARIATION_RATE, MAGNITUDE, ...
+        c = Chatter(*python)
+        expected = chatter_monitor.update(python, u, h)
+        assert afc.chatter_update(ctypes.byref(c), ctypes.c_double(u), ctypes.c_double(h)) == expected, relative
+        assert (c.variation_rate, c.magnitude, c.warned) == (python[1], python[2], python[5])
+        verdicts.add(expected)
+    assert verdicts == {True, False}  # the threshold was crossed inside the window

@@ -124,7 +124,7 @@ def test_the_header_is_read_whole():
     assert header_structs(text)["Action"][:2] == ["kind", "fmi_version"]
     assert header_structs(text)["MeLoop"][-2:] == ["failure", "evaluations"]
     assert header_codes(text)[:3] == ["ACTION_READ", "ACTION_WRITE", "LOOP_DONE"]
-    assert header_codes(text)[-1] == "LOOP_EVENT"
+    assert header_codes(text)[-1] == "LOOP_OUT_OF_MEMORY"
 
 
 BROKEN = [  # (what is changed in a copy of the header, the mismatch it must give)
@@ -135,7 +135,7 @@ BROKEN = [  # (what is changed in a copy of the header, the mismatch it must giv
     ("    int32_t fmi_version;\n    void *instance;\n    void *do_step;",
      "    int32_t fmi_version;\n    int32_t spare;\n    void *instance;\n    void *do_step;", "struct Stepper: header fields"),
     ("LOOP_EVENT = 11,", "LOOP_EVENT = 12,", "LOOP_EVENT: 12 in the header, 11 in loop_interface.py"),
-    ("    LOOP_EVENT = 11,", "    LOOP_EVENT = 11,\n    LOOP_PAUSED = 12,", "codes: header"),
+    ("    LOOP_OUT_OF_MEMORY = 12,", "    LOOP_OUT_OF_MEMORY = 12,\n    LOOP_PAUSED = 13,", "codes: header"),
     ("    double step;\n    Outcome failure;", "    float step;\n    Outcome failure;",
      "sizeof(MeLoop.step): 4 in the header, 8 in loop_interface.py"),
 ]

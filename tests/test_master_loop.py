@@ -20,6 +20,7 @@ import pytest
 from harness.fmu_build import native as build_native
 from harness.fmu_build import toolchain as c_toolchain
 from harness import compiled_loop, master_loop
+from harness import master as master_module
 from harness import scenario as scenarios
 from harness.loop_interface import ACTION_READ, ACTION_WRITE, Action, LoopOutcome, Outcome, Stepper
 from harness.master import Master, SimulationFailed
@@ -115,13 +116,54 @@ class FakeSystem:
         self.trace.append((f"step{name}", time, step))
         return self._status(f"step{name}")
 
-    def run(self, first_row: int, last_row: int, start=0.1, step=0.0005, check_every=4) -> Outcome:
+    def run(self, first_row: int, last_row: int, start=0.1, step=0.0005, check_every=4, steps=-1) -> Outcome:
         function = master_loop.library("c").master_loop_run
         outcome = Outcome()
-        function(self.actions, 3, self.steppers, 2, start, step, first_row, last_row,
+        function(self.actions, 3, self.steppers, 2, start, step, first_row, last_row, steps,
                  self.record.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 2,
                  ctypes.cast(self.column_bounds, ctypes.POINTER(ctypes.c_double)), check_every, ctypes.byref(outcome))
         return outcome
+
+    def finish(self, steps: int, check_every=4) -> Outcome:
+        function = master_loop.library("c").master_loop_finish
+        outcome = Outcome()
+        function(self.actions, 3, steps, self.record.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), 2,
+                 ctypes.cast(self.column_bounds, ctypes.POINTER(ctypes.c_double)), check_every, ctypes.byref(outcome))
+        return outcome
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_the_last_communication_point_is_the_plans_pass_and_the_check_of_the_rows_left(fmi_version):
+    """master_loop_finish: row `steps` is read, handed along and recorded with no doStep; then the rows after
+    the last block check are checked (here rows 8 .. 10 of 11, check_every 4)."""
+    system = FakeSystem(fmi_version, rows=11)
+    assert system.run(0, 10).outcome == LoopOutcome.DONE
+    del system.trace[:]
+    outcome = system.finish(10)
+    assert outcome.outcome == LoopOutcome.DONE and outcome.row == 10
+    assert [entry[0] for entry in system.trace] == ["getA", "setB", "getB"]  # no doStep
+    assert list(system.record[10]) == [3 * (2 * 10 + 0.5), 10.25]
+    tail = FakeSystem(fmi_version, rows=11, record_bounds=(1e6, 9.0), a0_override=(10, 0.0))  # row 9 alone is beyond
+    assert tail.run(0, 8).outcome == LoopOutcome.DONE  # rows 0 .. 7, checked at 4 and 8
+    tail.row = {key: 10 for key in tail.row}
+    tail.record[8:10] = [[0.0, 8.25], [0.0, 9.25]]  # rows 8, 9 as a run would leave them
+    stopped = tail.finish(10)
+    assert (stopped.outcome, stopped.row) == (LoopOutcome.RECORD_DIVERGED, 10)
+    failing = FakeSystem(fmi_version, rows=11, fail=("getA", 0, 3))
+    failed = failing.finish(10)
+    assert (failed.outcome, failed.row, failed.index, failed.status) == (LoopOutcome.READ_FAILED, 10, 0, 3)
+
+
+def test_a_call_that_reaches_the_last_row_ends_with_the_last_communication_point():
+    """master_loop_run with last_row = steps: the rows, then master_loop_finish's pass, in one call."""
+    whole, parts = FakeSystem(2, rows=11), FakeSystem(2, rows=11)
+    assert whole.run(0, 10, steps=10).outcome == LoopOutcome.DONE
+    assert parts.run(0, 10).outcome == LoopOutcome.DONE and parts.finish(10).outcome == LoopOutcome.DONE
+    assert whole.trace == parts.trace and whole.trace[-1][0] == "getB"  # no doStep after the last row
+    assert np.array_equal(whole.record, parts.record)
+    assert FakeSystem(2, rows=11).run(0, 6, steps=10).outcome == LoopOutcome.DONE  # a block before the end: rows only
+    failing = FakeSystem(2, rows=11, fail=("getA", 10, 3)).run(0, 10, steps=10)
+    assert (failing.outcome, failing.row, failing.index) == (LoopOutcome.READ_FAILED, 10, 0)
 
 
 @pytest.mark.parametrize("fmi_version", [2, 3])
@@ -155,7 +197,11 @@ def test_an_fmi_error_stops_the_block_where_the_python_loop_stops(fmi_version, s
     outcome = system.run(0, 6)
     assert (outcome.outcome, outcome.row, outcome.index, outcome.status) == (outcome_kind, 2, action, status)
     assert system.trace[-1][0] == call  # nothing is called after the failing call
-    assert (system.record[:rows_recorded] != -1).all() and (system.record[rows_recorded:] == -1).all()
+    # the rows kept are recorded; nothing is written past the failing row (a read that fills its record columns
+    # itself may have written into the failing row, which the master does not keep)
+    assert (system.record[:rows_recorded] != -1).all() and (system.record[3:] == -1).all()
+    if call != "getB":
+        assert (system.record[rows_recorded:] == -1).all()
 
 
 @pytest.mark.parametrize("call", ["getA", "setB", "getB", "stepA", "stepB"])
@@ -199,6 +245,15 @@ def test_every_row_of_a_check_block_is_checked(row, stop_row):
         assert outcome.outcome == LoopOutcome.DONE
     else:
         assert (outcome.outcome, outcome.row) == (LoopOutcome.RECORD_DIVERGED, stop_row)
+
+
+@pytest.mark.parametrize("split", [1, 2, 3])
+def test_a_block_begun_by_an_earlier_call_is_checked_whole(split):
+    """Row 1 is beyond its bound; the block 0 .. 3 ends in the second call, which stops at its end."""
+    system = FakeSystem(2, rows=9, record_bounds=(1e6, 50.0), a0_override=(1, 1e300), bound2=float("inf"))
+    assert system.run(0, split, check_every=4).outcome == LoopOutcome.DONE
+    outcome = system.run(split, 9, check_every=4)
+    assert (outcome.outcome, outcome.row) == (LoopOutcome.RECORD_DIVERGED, 3)
 
 
 def test_blocks_continue_where_the_last_one_ended():
@@ -364,3 +419,40 @@ def test_progress_is_reported_at_the_same_rows_with_either_loop(native_fmus):
             progress=lambda done, total, seen=calls[loop]: seen.append((done, total)), progress_every=30)
     assert calls["python"] == calls["c"]
     assert calls["c"][:2] == [(30, 200), (60, 200)] and calls["c"][-1] == (200, 200)
+
+
+def _counted_blocks(monkeypatch) -> list:
+    """The (first_row, last_row) of every call of the compiled loop from now on."""
+    blocks = []
+    run = master_loop.CompiledLoop.run
+
+    def counted(self, start, step, first_row, last_row, steps=-1):
+        blocks.append((first_row, last_row))
+        return run(self, start, step, first_row, last_row, steps)
+
+    monkeypatch.setattr(master_loop.CompiledLoop, "run", counted)
+    return blocks
+
+
+def test_a_run_no_one_follows_is_one_call_of_the_compiled_loop(native_fmus, monkeypatch):
+    """No Python between blocks: without a progress callback the C loop runs every row (and checks every
+    bound) in one call."""
+    blocks = _counted_blocks(monkeypatch)
+    scenario = scenarios.configure("pendulum_case1", "vud", None, 1.0)  # 2000 steps
+    result = Master(scenario, "feedthrough", native_fmus, loop="c").run()
+    assert blocks == [(0, 2000)] and result.complete and result.rows == 2001
+
+
+def test_followed_progress_comes_in_blocks_of_wall_time(native_fmus, monkeypatch):
+    """With a callback and no progress_every, the first block has FIRST_PROGRESS_BLOCK rows and the next ones
+    last about PROGRESS_BLOCK_S each, sized from the rate so far; one progress call per block, the last at the end."""
+    blocks = _counted_blocks(monkeypatch)
+    monkeypatch.setattr(master_module, "FIRST_PROGRESS_BLOCK", 100)
+    monkeypatch.setattr(master_module, "PROGRESS_BLOCK_S", 0.004)  # a few ms: several blocks in a short run
+    calls = []
+    scenario = scenarios.configure("pendulum_case1", "vud", None, 5.0)  # 10000 steps
+    Master(scenario, "feedthrough", native_fmus, loop="c").run(progress=lambda done, total: calls.append(done))
+    assert blocks[0] == (0, 100) and blocks[-1][1] == 10000 and 3 <= len(blocks) < 200
+    assert all(first == previous_last for (first, _), (_, previous_last) in zip(blocks[1:], blocks))
+    assert max(last - first for first, last in blocks[1:-1]) > 100  # sized from the rate, not by a fixed count
+    assert calls == [last for _, last in blocks] + [10000]  # and Master.run's own final call

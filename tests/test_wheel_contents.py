@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def shipped_sources() -> set:
     """The project's files a wheel must hold (what git tracks under the packages, but the tests)."""
     tracked = subprocess.run(["git", "ls-files", "fmu_src", "plants", "harness/fmu_build", "harness/*.py", "harness/*.c",
-                              "harness/*.h", "harness/scenarios", "harness/references"], cwd=ROOT,
+                              "harness/*.h", "harness/hosts/*.c", "harness/scenarios", "harness/references"], cwd=ROOT,
                              capture_output=True, text=True, check=True).stdout.split()
     return set(tracked)
 

@@ -15,8 +15,10 @@ On the same ``pendulum_case1``/``vud`` system at the same step:
    them, with its Python loop;
 each with its ratio to ours; and 7. each FMU alone (plant, reference, controller: the
 master's raw calls on that one instance) next to its null twin, which shows where the
-time of a step goes and what each FMU's Python adds to the FMI floor.  Speed targets live
-here, not in timed tests.
+time of a step goes and what each FMU's Python adds to the FMI floor.  With ``--edition
+native``, 8. our native master against a plain C host over the same FMUs and the math floor
+at horizons of 1 s to 20 s (harness/hosts/bench_c_baselines.py; ``--instructions`` adds their
+instructions per step under callgrind).  Speed targets live here, not in timed tests.
 """
 from __future__ import annotations
 
@@ -43,7 +45,7 @@ from ..master import Master
 from ..me_master import ModelExchangeMaster
 from ..scenario_checks import resolve_fmu
 from ..studies.oracle import simulate_oracle
-from . import engines, ssp
+from . import bench_c_baselines, engines, ssp
 from .libcosim import run_libcosim, with_algorithm
 
 NULL_FMUS = {  # instance -> (model identifier, the FMU whose variables it copies)
@@ -340,7 +342,18 @@ def tables_wall_seconds(edition: str, stop: float | None = None, algorithm: str 
 
 
 def bench_command(args) -> int:
+    native_section = fmu_catalog.selected_edition() == "native"
+    if args.instructions and not native_section:
+        raise cli_args.UsageError("--instructions counts the native loops: add --edition native")
     figures = bench(args.scenario, args.controller, args.stop, args.step, args.repeat)
+    if native_section:
+        native = native_paths()
+        if native is None:
+            figures["notes"]["native_against_c"] = "no C compiler: pip install -e '.[native]'"
+        else:
+            figures["native_against_c"] = bench_c_baselines.measure(native, args.horizons, args.repeat)
+            if args.instructions:
+                figures["instructions_per_step"] = bench_c_baselines.instructions()
     if args.tables:
         for key, edition, algorithm in (("native", "native", None), ("native_me", "native", "me"),
                                         ("python", "python", None)):
@@ -411,6 +424,10 @@ def bench_command(args) -> int:
     if fmpy_whole:
         print(f"  target: ours at least 2x faster than fmpy's SSP simulator (whole runs): "
               f"{fmpy_whole / ours_whole:.2f}x")
+    if figures.get("native_against_c"):
+        bench_c_baselines.print_section(figures["native_against_c"], args.repeat, figures.get("instructions_per_step"))
+    elif native_section:
+        print(f"  the native master against a plain C host: {figures['notes']['native_against_c']}")
     return 0
 
 
@@ -425,5 +442,11 @@ def register(commands):
     parser.add_argument("--tables", action="store_true",
                         help="also time `tables` (the Table I/II report, full horizon) in both editions and with "
                              "--algorithm me: about 5 s native, 10 s native Model Exchange, 50 s pythonfmu")
+    parser.add_argument("--horizons", type=bench_c_baselines.horizons, default=bench_c_baselines.HORIZONS,
+                        help="--edition native: the horizons (s, comma-separated) at which our master, the plain C "
+                             "host and the math floor are timed (default 1,2,5,10,20)")
+    parser.add_argument("--instructions", action="store_true",
+                        help="--edition native: also count the three loops' instructions per step with valgrind's "
+                             "callgrind (about 5 min; needs valgrind)")
     parser.set_defaults(handler=bench_command)
 

@@ -37,6 +37,11 @@ static void motor_arm_derivative(double t, const double x[], double u, const dou
 
 const PlantDerivative plant_derivative = motor_arm_derivative;
 
+/* co-simulation's step: RK4 with u held, motor_arm_derivative inlined into its stages */
+void plant_advance(double t, double x[], double u, const Rk4Split *split, const double *params) {
+    rk4_advance_states(motor_arm_derivative, t, x, PLANT_STATES, u, split, params);
+}
+
 int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
     (void)m; (void)message; (void)size;
     return MODEL_OK;

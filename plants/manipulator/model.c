@@ -55,6 +55,11 @@ static void manipulator_derivative(double t, const double x[], double u, const d
 
 const PlantDerivative plant_derivative = manipulator_derivative;
 
+/* co-simulation's step: RK4 with u held, manipulator_derivative inlined into its stages */
+void plant_advance(double t, double x[], double u, const Rk4Split *split, const double *params) {
+    rk4_advance(manipulator_derivative, t, x, u, split, params);
+}
+
 int model_cross_parameter_errors(ModelInstance *m, char *message, size_t size) {
     if (!(V(m, mr1) < V(m, mr0))) {
         snprintf(message, size, "parameter mr1 = %.17g is invalid; valid range: 0 <= mr1 < mr0 = %.17g "

@@ -18,7 +18,19 @@
 #define TWO_PI (2.0 * 3.141592653589793)
 #define SENSOR_CHANNELS 4
 
-const size_t MODEL_INTERNAL_BYTES = sizeof(SampledState);
+/* the chain's state, then the constants of measure that the parameters fix, computed when initialisation ends
+ * (fmu.py's Sensor.configure: _keys, _coefficient, _filtered; a restored FMU state brings those of its own
+ * parameters) */
+typedef struct {
+    SampledState sampled;
+    uint64_t keys[SENSOR_CHANNELS]; /* stream_key of each channel */
+    double coefficient;             /* a of (S3) */
+    double filtered;                /* the filter runs (filter_time_constant != 0) */
+} SensorState;
+
+#define SENSOR(m) ((SensorState *)(m)->internal)
+
+const size_t MODEL_INTERNAL_BYTES = sizeof(SensorState);
 const int SAMPLED_CHANNELS = SENSOR_CHANNELS;
 const int SAMPLED_INPUTS[] = {VR_y, VR_dy, VR_d2y, VR_d3y};
 const char *const SAMPLED_INPUT_NAMES = "y, dy, d2y, d3y";
@@ -72,10 +84,9 @@ static double measure(uint64_t key, long k, double true_value, double previous, 
 }
 
 double sampled_process(ModelInstance *m, long k, int channel, double value, double previous) {
-    uint64_t key = stream_key((uint64_t)V(m, seed), (uint64_t)V(m, local_seed), channel);
-    return measure(key, k, value, previous, m->s->values[NOISE[channel]], m->s->values[QUANTUM[channel]],
-                   filter_coefficient(V(m, sample_period), V(m, filter_time_constant)),
-                   V(m, filter_time_constant) != 0.0);
+    const SensorState *sensor = SENSOR(m);
+    return measure(sensor->keys[channel], k, value, previous, m->s->values[NOISE[channel]],
+                   m->s->values[QUANTUM[channel]], sensor->coefficient, sensor->filtered != 0.0);
 }
 
 void sampled_set_outputs(ModelInstance *m, const double held[]) {
@@ -91,7 +102,14 @@ void sampled_advance(ModelInstance *m, double begin, double end, const double he
 
 int sampled_feeds_through(ModelInstance *m) { (void)m; return 1; }
 
-void sampled_initialize(ModelInstance *m) { (void)m; }
+/* Sensor.configure: the constants of measure from the parameters */
+void sampled_initialize(ModelInstance *m) {
+    SensorState *sensor = SENSOR(m);
+    for (int c = 0; c < SENSOR_CHANNELS; c++)
+        sensor->keys[c] = stream_key((uint64_t)V(m, seed), (uint64_t)V(m, local_seed), c);
+    sensor->coefficient = filter_coefficient(V(m, sample_period), V(m, filter_time_constant));
+    sensor->filtered = V(m, filter_time_constant) != 0.0 ? 1.0 : 0.0;
+}
 
 /* the stages that need the sensor's clock, refused without one (Sensor.cross_parameter_errors); in Model
  * Exchange a quantiser without a clock too: its steps would be state events this FMU does not declare */
