@@ -546,6 +546,39 @@ def test_a_run_killed_mid_trial_is_resumed_by_another_through_its_heartbeat(tmp_
     assert len(finished_of(after.values())) == 16 == summary["finished"]
 
 
+class KilledHere(BaseException):
+    """Stands for the SIGKILL of a tune process at one point of its code."""
+
+
+def test_a_process_killed_right_after_claiming_its_trial_leaves_a_trial_that_goes_stale(tmp_path, monkeypatch):
+    """Killed between writing its trial's owner and sampling it: another host sees a RUNNING trial it cannot
+    ask about, so only the heartbeat can tell it dead; the trial must have one (Optuna ignores trials
+    without) and is failed once the grace period has passed."""
+    from types import SimpleNamespace
+
+    monkeypatch.setattr(storage, "HEARTBEAT_S", 1)
+    monkeypatch.setattr(storage, "GRACE_S", 1)
+    url = f"sqlite:///{tmp_path / 'killed.db'}"
+    study = optuna.create_study(study_name="killed", storage=storage.open_storage(url))
+    claim = optuna.trial.Trial.set_user_attr
+
+    def claim_then_die(trial, key, value):
+        claim(trial, key, value)
+        raise KilledHere
+
+    monkeypatch.setattr(optuna.trial.Trial, "set_user_attr", claim_then_die)
+    heartbeat = storage.Heartbeat(study._storage)
+    prepared = SimpleNamespace(config=SimpleNamespace(sampler="random", seed=3, trials=4))
+    with pytest.raises(KilledHere):
+        loop._ask(study, prepared, heartbeat, {"host": "another-host", "pid": 1}, None, [], None, None, 0)
+    heartbeat.close()  # the process is gone: no more beats
+    monkeypatch.undo()
+    time.sleep(2.5)
+    optuna.storages.fail_stale_trials(study)
+    trial = study.get_trials(deepcopy=False)[0]
+    assert trial.state == optuna.trial.TrialState.FAIL, "a claimed trial without heartbeat never goes stale"
+
+
 @pytest.mark.parametrize("problem", ["refused", "wrong password", "missing database", "missing driver"])
 def test_a_database_server_that_cannot_be_used_is_one_line_exit_2_before_any_trial(postgres, tmp_path, edition,
                                                                                    capsys, monkeypatch, problem):

@@ -90,14 +90,17 @@ def _ask(study, prepared: Prepared, heartbeat, owner: dict, x0, pending: list, l
     study.sampler = sampler_for(config.sampler, config.seed, count, x0)
     trial = study.ask()
     pending.append(trial)
+    # the heartbeat before the claim: a trial whose owner is written has a heartbeat, so one of a process
+    # killed on another host goes stale (fail_stale_trials); Optuna never fails a trial without one
+    heartbeat.add(trial._trial_id)
     try:
         trial.set_user_attr("owner", owner)  # claimed: recover_dead_trials knows whose it is
     except optuna.exceptions.UpdateFinishedTrialError:
         # another process found it unclaimed for ORPHAN_S (a machine under heavy load), counted it lost
         # and queued its parameters again: it is not ours to run
         pending.remove(trial)
+        heartbeat.remove(trial._trial_id)
         return None
-    heartbeat.add(trial._trial_id)
     alive = sorted(t.number for t in study.get_trials(deepcopy=False) if t.state != TrialState.FAIL)
     if alive.index(trial.number) >= config.trials:  # other processes filled the budget meanwhile
         trial.set_user_attr("outcome", {"status": "surplus", "reason": "the study's budget was reached by other "
