@@ -451,7 +451,8 @@ def fast_loop_summary(seconds: dict, shown: int = FAST_LOOP_SHOWN) -> list:
         return []
     slowest = sorted(seconds.items(), key=lambda item: -item[1])[:shown]
     lines = [f"the fast loop (-m 'not slow'): {len(seconds)} tests, {sum(seconds.values()):.1f} s of test time "
-             f"in all (its serial wall time, FMU builds included); its {len(slowest)} slowest:"]
+             f"in all (setup, call and teardown; collection and the session's FMU builds not counted); "
+             f"its {len(slowest)} slowest:"]
     lines += [f"  {duration:7.2f} s  {test_id}" for test_id, duration in slowest]
     return lines
 
