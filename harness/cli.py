@@ -23,7 +23,7 @@ from .master import SimulationFailed
 from .me_master import ALGORITHM as MODEL_EXCHANGE
 from .me_master import DEFAULT_RTOL
 from .scores import SCORE_KEYS, score_run, value_text, why_none
-from .studies import (compat, hardware, me_accuracy, mutation, regression, robustness, step_study, sweep, tables, tune,
+from .studies import (compat, hardware_cures, me_accuracy, mutation, regression, robustness, step_study, sweep, tables, tune,
                       work_precision)
 
 
@@ -131,7 +131,7 @@ def register_run(commands):
 
 #: every subcommand, in the order of ``--help``: each lives in its own module with a ``register(commands)``
 SUBCOMMAND_REGISTRATIONS = (register_run, tables.register, step_study.register, me_accuracy.register,
-                            work_precision.register, sweep.register, robustness.register, hardware.register,
+                            work_precision.register, sweep.register, robustness.register, hardware_cures.register,
                             regression.register, ssp.register, engines.register, bench.register, mutation.register, matrix.register, tune.register,
                             compat.register)
 

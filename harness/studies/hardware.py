@@ -279,10 +279,6 @@ def with_section(text: str, rows: list) -> str:
 def hardware_command(args) -> int:
     if args.apply and args.stop is not None:
         raise cli_args.UsageError("--apply writes the docs from the full runs: leave out --stop")
-    if args.cures:
-        from . import hardware_cures  # the cures' study builds on this module's settings
-
-        return hardware_cures.cures_command(args)
     out = Path(args.out or "results/hardware")
     cli_args.refuse_tracked([out / DOCS_CSV.name, out / "hardware_study.md"])
     cli_args.check_writable([out / DOCS_CSV.name, out / "hardware_study.md"])
@@ -304,6 +300,8 @@ def hardware_command(args) -> int:
 
 
 def register(commands):
+    """The ``hardware`` subcommand's parser, its handler the plain study; hardware_cures.register puts the
+    --cures dispatch on top (the cures' study builds on this module, not the reverse)."""
     parser = commands.add_parser("hardware", help="the three controllers with and without a rig (sensor noise, "
                                                   "quantisation, delay, actuator limits), each stage alone",
                                  description=__doc__.split("\n\n")[0])
@@ -319,3 +317,4 @@ def register(commands):
                              "beside the three controllers (OUT/hardware_cures.csv and .md; --apply: "
                              "docs/hardware_cures.csv and its section of docs/studies.md)")
     parser.set_defaults(handler=hardware_command)
+    return parser

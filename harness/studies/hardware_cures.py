@@ -41,6 +41,7 @@ from .. import scenario as scenarios
 from ..cases import parallel_map
 from ..master import Master, SimulationFailed
 from ..scores import score_run
+from ..fmu_build import catalog as fmu_catalog
 from ..units import score_units
 from . import hardware
 
@@ -95,8 +96,6 @@ def rule_values(name: str) -> dict:
 
 
 def _controller_table():
-    from ..fmu_build import catalog as fmu_catalog
-
     return fmu_catalog.model_class("AdaptiveFuzzyController").VARIABLES
 
 
@@ -276,3 +275,15 @@ def cures_command(args) -> int:
         STUDIES_PAGE.write_text(with_section(STUDIES_PAGE.read_text(), text_rows))
         print(f"applied  {DOCS_CSV} and the section of {STUDIES_PAGE}")
     return 0
+
+
+def hardware_or_cures_command(args) -> int:
+    """``python -m harness hardware``: the cures' study with --cures, the plain study without."""
+    if args.apply and args.stop is not None:
+        raise cli_args.UsageError("--apply writes the docs from the full runs: leave out --stop")
+    return cures_command(args) if args.cures else hardware.hardware_command(args)
+
+
+def register(commands):
+    """The ``hardware`` subcommand (hardware.register's parser) with its --cures dispatch."""
+    hardware.register(commands).set_defaults(handler=hardware_or_cures_command)

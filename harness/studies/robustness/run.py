@@ -164,8 +164,11 @@ def run_study(plan: StudyPlan, out, jobs: int | None = None, scheduler: str | No
 
 
 def summarise(plan: StudyPlan, rows: list, spec=None, scores=DEFAULT_SCORES) -> dict:
-    """The summary of the rows (harness/studies/robustness/statistics.py and influence.py)."""
+    """The summary of the rows (harness/studies/robustness/statistics.py and influence.py), taken in sample
+    order: a function of the rows alone, whatever order the workers finished them in (the bootstrap
+    resamples by position)."""
     bounds = [d.support() for d in plan.distributions]
+    rows = sorted(rows, key=lambda row: row["sample"])
     per_controller, influence = {}, {}
     for controller in plan.controllers:
         mine = [row for row in rows if row["controller"] == controller]
