@@ -204,13 +204,16 @@ class DaskCluster:
         text = (self.folder / f"worker{index}.log").read_text(errors="replace")
         return re.findall(r"Start worker at:\s+(\S+)", text)[-1]
 
-    def busy_worker(self, timeout_s: float = START_TIMEOUT_S) -> int:
-        """The index of a live worker that holds a task now (waits for one): a kill that loses work."""
+    def busy_worker(self, timeout_s: float = START_TIMEOUT_S, alive=lambda: True) -> int | None:
+        """The index of a live worker that holds a task now (waits for one): a kill that loses work; None
+        once ``alive()`` is false (the client whose tasks they would be has ended)."""
         from distributed import Client
 
         deadline = time.monotonic() + timeout_s
         with Client(self.address, timeout=f"{int(timeout_s)}s", set_as_default=False) as client:
             while time.monotonic() < deadline:
+                if not alive():
+                    return None
                 processing = client.processing()
                 for index, process in enumerate(self.workers):
                     if process.poll() is None and processing.get(self.worker_address(index)):

@@ -160,7 +160,7 @@ def test_a_short_tune_on_the_cluster_finishes_as_the_local_pool_does(dask_cluste
         assert not [t for t in trials if t.state == optuna.trial.TrialState.RUNNING]
         assert len({t.number for t in trials}) == len(trials)
     # the scheduler gone mid-study: one line, the finished trials kept, the study completed by another run
-    long = ["tune", "pendulum_case1", "--stop", "2", "--trials", "16", "--quiet", "--held-out", "--study", "long",
+    long = ["tune", "pendulum_case1", "--stop", "2", "--trials", "40", "--quiet", "--held-out", "--study", "long",
             "--storage", url, "--out", str(tmp_path / "dask")]
     command = subprocess.Popen([sys.executable, "-m", "harness", *long, "--scheduler", dask_cluster.address],
                                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
@@ -175,7 +175,10 @@ def test_a_short_tune_on_the_cluster_finishes_as_the_local_pool_does(dask_cluste
                 trials = []
             count = sum(t.state in finished for t in trials)
             if count >= 2 and killed_at > count:
-                dask_cluster.kill_worker(dask_cluster.busy_worker())  # its trial runs again on the other, told once
+                busy = dask_cluster.busy_worker(alive=lambda: command.poll() is None)
+                if busy is None:  # the study ended first (the assertions below show how)
+                    break
+                dask_cluster.kill_worker(busy)  # its trial runs again on the other, told once
                 killed_at = count
             if count >= killed_at + 3:
                 dask_cluster.kill_scheduler()
@@ -198,7 +201,7 @@ def test_a_short_tune_on_the_cluster_finishes_as_the_local_pool_does(dask_cluste
     assert sum(t.state in finished for t in trials) >= killed_at + 3
     assert cli_main([*long, "--jobs", "2"]) == 0
     trials = optuna.load_study(study_name="long", storage=url).get_trials()
-    assert sum(t.state in finished for t in trials) == 16
+    assert sum(t.state in finished for t in trials) == 40
     assert not [t for t in trials if t.state == optuna.trial.TrialState.RUNNING]
 
 
