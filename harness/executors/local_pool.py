@@ -19,6 +19,7 @@ import multiprocessing
 import os
 import signal
 import threading
+import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
@@ -26,6 +27,7 @@ from .. import termination
 from ..unpack import remove_dead_folders
 from .tasks import Done, WorkerLost, forget_worker_state, run_task
 
+EXIT_WAIT_S = 5.0  # a broken pool's workers, all together, are given this long to be reaped (their exit codes)
 IN_FLIGHT_PER_WORKER = 2  # tasks handed to the pool per worker: one running, one ready to start
 
 
@@ -137,9 +139,9 @@ class LocalPool:
         self.processes.update(getattr(self.executor, "_processes", None) or {})
 
     def _exit_codes(self) -> list:
-        codes = []
+        codes, deadline = [], time.monotonic() + EXIT_WAIT_S
         for process in list(self.processes.values()):
-            process.join(1.0)
+            process.join(max(0.0, deadline - time.monotonic()))
             if process.exitcode not in (None, 0):
                 codes.append(process.exitcode)
         self.processes.clear()
