@@ -188,3 +188,22 @@ def test_a_short_run_of_the_cures_writes_its_csv_and_section(tmp_path, capsys):
     assert len(hardware.read_csv(tmp_path / "hardware_cures.csv")) == 112
     assert cli_main(["hardware", "--cures", "--stop", "0.05", "--apply", "--out", str(tmp_path)]) == 2
     assert cli_main(["hardware", "--cures", "--out", "docs", "--stop", "0.01"]) == 2  # a tracked output
+
+
+class _DiskFull:
+    def __str__(self):
+        raise OSError(28, "No space left on device")
+
+
+@pytest.mark.parametrize("study", ["hardware", "hardware_cures"])
+def test_a_csv_that_fails_mid_write_leaves_the_previous_file_and_names_it(tmp_path, study):
+    from harness.atomic_files import OutputError
+
+    module = {"hardware": hardware, "hardware_cures": hardware_cures}[study]
+    path = tmp_path / "study.csv"
+    path.write_text("the previous file\n")
+    rows = [{"scenario": "pendulum_case2_hardware"}, {"scenario": _DiskFull()}]
+    with pytest.raises(OutputError, match=re.escape(f"cannot write {path}: No space left on device; the previous")):
+        module.write_csv(rows, path)
+    assert path.read_text() == "the previous file\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["study.csv"]  # no partial file left

@@ -28,12 +28,11 @@ from __future__ import annotations
 import csv
 import math
 import re
-import shutil
 from pathlib import Path
 
 import numpy as np
 
-from .. import cli_args, variants
+from .. import atomic_files, cli_args, variants
 from .. import scenario as scenarios
 from ..cases import parallel_map
 from ..master import Master, SimulationFailed
@@ -127,13 +126,13 @@ def items(stop: float | None = None, names=HARDWARE_SCENARIOS, controllers=varia
     return [(name, setting, controller, stop) for name in names for setting in SETTINGS for controller in controllers]
 
 
-def write_csv(rows: list, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as stream:
-        writer = csv.DictWriter(stream, COLUMNS, lineterminator="\n")
+def write_csv(rows: list, path: Path, columns=COLUMNS) -> Path:
+    """One row per run, written beside ``path`` and renamed over it (a failure leaves the previous file)."""
+    with atomic_files.replacing(path, "w", newline="") as stream:
+        writer = csv.DictWriter(stream, columns, lineterminator="\n")
         writer.writeheader()
         for row in rows:
-            writer.writerow({key: _cell(row.get(key)) for key in COLUMNS})
+            writer.writerow({key: _cell(row.get(key)) for key in columns})
     return path
 
 
@@ -277,8 +276,7 @@ def with_section(text: str, rows: list) -> str:
 
 # ------------------------------------------------------------------ the command
 def hardware_command(args) -> int:
-    if args.apply and args.stop is not None:
-        raise cli_args.UsageError("--apply writes the docs from the full runs: leave out --stop")
+    """The plain study (hardware_cures.hardware_or_cures_command checks the options and dispatches)."""
     out = Path(args.out or "results/hardware")
     cli_args.refuse_tracked([out / DOCS_CSV.name, out / "hardware_study.md"])
     cli_args.check_writable([out / DOCS_CSV.name, out / "hardware_study.md"])
@@ -287,14 +285,13 @@ def hardware_command(args) -> int:
                         label=lambda item: f"{item[0]}/{item[1]}/{item[2]}")
     csv_path = write_csv(rows, out / DOCS_CSV.name)
     text_rows = read_csv(csv_path)
-    (out / "hardware_study.md").write_text(section(text_rows) + "\n")
+    atomic_files.write_text(out / "hardware_study.md", section(text_rows) + "\n")
     failed = [f"{r['scenario']}/{r['setting']}/{r['controller']}" for r in rows if r["status"] != "ok"]
     print(f"{len(rows)} runs ({len(failed)} failed{': ' + ', '.join(failed) if failed else ''}): {csv_path}, "
           f"{out / 'hardware_study.md'}")
     if args.apply:
-        shutil.copyfile(csv_path, DOCS_CSV)
-        page = STUDIES_PAGE.read_text()
-        STUDIES_PAGE.write_text(with_section(page, text_rows))
+        atomic_files.write_bytes(DOCS_CSV, csv_path.read_bytes())
+        atomic_files.write_text(STUDIES_PAGE, with_section(STUDIES_PAGE.read_text(), text_rows))
         print(f"applied  {DOCS_CSV} and the section of {STUDIES_PAGE}")
     return 0
 

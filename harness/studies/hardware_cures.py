@@ -31,17 +31,16 @@ from __future__ import annotations
 
 import math
 import re
-import shutil
 from pathlib import Path
 
 from fmu_src import afc_math
 
-from .. import cli_args, variants
+from .. import atomic_files, cli_args, variants
 from .. import scenario as scenarios
 from ..cases import parallel_map
+from ..fmu_build import catalog as fmu_catalog
 from ..master import Master, SimulationFailed
 from ..scores import score_run
-from ..fmu_build import catalog as fmu_catalog
 from ..units import score_units
 from . import hardware
 
@@ -137,15 +136,7 @@ def run_one(item) -> dict:
 
 
 def write_csv(rows: list, path: Path) -> Path:
-    import csv
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as stream:
-        writer = csv.DictWriter(stream, COLUMNS, lineterminator="\n")
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({key: hardware._cell(row.get(key)) for key in COLUMNS})
-    return path
+    return hardware.write_csv(rows, path, COLUMNS)
 
 
 # ------------------------------------------------------------------ the page
@@ -266,13 +257,13 @@ def cures_command(args) -> int:
                                            f"{' x' + format(item[4], 'g') if item[3] else ''}")
     csv_path = write_csv(rows, outputs[0])
     text_rows = hardware.read_csv(csv_path)
-    outputs[1].write_text(section(text_rows) + "\n")
+    atomic_files.write_text(outputs[1], section(text_rows) + "\n")
     failed = sum(r["status"] != "ok" for r in rows)
     print(f"{len(rows)} runs ({failed} failed: a cure's run that diverged is a result, see its row): {csv_path}, "
           f"{outputs[1]}")
     if args.apply:
-        shutil.copyfile(csv_path, DOCS_CSV)
-        STUDIES_PAGE.write_text(with_section(STUDIES_PAGE.read_text(), text_rows))
+        atomic_files.write_bytes(DOCS_CSV, csv_path.read_bytes())
+        atomic_files.write_text(STUDIES_PAGE, with_section(STUDIES_PAGE.read_text(), text_rows))
         print(f"applied  {DOCS_CSV} and the section of {STUDIES_PAGE}")
     return 0
 
