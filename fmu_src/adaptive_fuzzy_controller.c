@@ -49,6 +49,7 @@ typedef struct {
      * filtered errors of the last output evaluation (the Python edition's filter, _filtered_error) */
     double filter[2 + MAX_ORDER];
     double filtered[MAX_ORDER];
+    int adapt_cures;                /* some cure of the adaptive law is on: dead_zone, sigma, filter_time_constant */
 } ControllerState;
 
 #define STATE(m) ((ControllerState *)(m)->internal)
@@ -242,6 +243,8 @@ static int configure(ModelInstance *m) {
     p->lambda_ce = V(m, lambda_ce);
     p->mf_slope = V(m, mf_slope);
     p->alpha_min = CURE(m, alpha_min); /* [23a]; 0 = off */
+    /* with the three off (the paper's law) a doStep tests this alone */
+    STATE(m)->adapt_cures = CURE(m, dead_zone) > 0.0 || CURE(m, sigma) > 0.0 || CURE(m, filter_time_constant) > 0.0;
     for (int i = 0; i < n; i++) {
         k[i] = values[VRS_k[i]];
         q[i] = values[VRS_q[i]];
@@ -312,9 +315,9 @@ int model_compute_outputs(ModelInstance *m) {
     ControllerState *state = STATE(m);
     double *values = m->s->values;
     const ControllerParameters *p = &state->p;
-    int n = p->order, rules = p->rules;
+    int n = p->order, rules = p->rules, paper_shape = default_shape(p);
     double e[MAX_ORDER], ym[MAX_ORDER], error[MAX_ORDER], alpha[MAX_ORDER], theta[MAX_RULES], xi[MAX_RULES];
-    if (default_shape(p)) {
+    if (paper_shape) {
         e[0] = V(m, e), e[1] = V(m, de), ym[0] = V(m, ym), ym[1] = V(m, dym);
         theta[0] = V(m, theta1), theta[1] = V(m, theta2), theta[2] = V(m, theta3), theta[3] = V(m, theta4);
     } else {
@@ -328,10 +331,14 @@ int model_compute_outputs(ModelInstance *m) {
     double u = controller_output(e, ym, m->s->time, theta, V(m, w_hat), p, error, alpha, xi); /* [9] */
     /* u or some E^(i) is NaN or inf (or all overflow together): one test of their sum, as the Python edition's */
     double modified_sum = 0.0;
-    for (int i = 0; i < n; i++) modified_sum += error[i];
+    if (paper_shape) {
+        modified_sum = (modified_sum + error[0]) + error[1];
+    } else {
+        for (int i = 0; i < n; i++) modified_sum += error[i];
+    }
     if (!isfinite(u + modified_sum)) return fail_outputs_overflow(m, u, error, e);
     V(m, u) = u;
-    if (default_shape(p)) {
+    if (paper_shape) {
         V(m, E) = error[0], V(m, dE) = error[1], V(m, alpha1) = alpha[0], V(m, alpha2) = alpha[1];
         state->xi[0] = xi[0], state->xi[1] = xi[1], state->xi[2] = xi[2], state->xi[3] = xi[3];
     } else {
@@ -411,8 +418,9 @@ static SHAPE_INLINE int adapt(ModelInstance *m, double current_time, double step
     }
     double tau = adaptation_signal(n, error, p->p_b); /* [31] */
     double w_hat = V(m, w_hat);
-    if (CURE(m, dead_zone) > 0.0) tau = dead_zone_signal(tau, CURE(m, dead_zone)); /* (31a), off at 0 */
-    if (CURE(m, sigma) > 0.0) { /* (31b), off at 0 */
+    int cures = state->adapt_cures;
+    if (cures && CURE(m, dead_zone) > 0.0) tau = dead_zone_signal(tau, CURE(m, dead_zone)); /* (31a), off at 0 */
+    if (cures && CURE(m, sigma) > 0.0) { /* (31b), off at 0 */
         leaky_step(m, tau, step_size, theta, adapted, &w_hat);
     } else {
         adapted_weights(rules, theta, tau, state->xi, V(m, gamma), V(m, m_theta), V(m, delta), step_size, adapted);
@@ -428,7 +436,7 @@ static SHAPE_INLINE int adapt(ModelInstance *m, double current_time, double step
         for (int j = 0; j < rules; j++) values[VRS_theta[j]] = adapted[j];
     }
     V(m, w_hat) = w_hat;
-    if (CURE(m, filter_time_constant) > 0.0) commit_filter(m, n, current_time); /* (F1) */
+    if (cures && CURE(m, filter_time_constant) > 0.0) commit_filter(m, n, current_time); /* (F1) */
 #if HOST_ROBUST
     if (chatter_update(&state->chatter, V(m, u), step_size)) warn_chatter(m, step_size);
 #endif

@@ -285,11 +285,13 @@ MESSAGE_PATH static Status refuse_step(ModelInstance *m, double current_time, do
 }
 
 static Status do_step(ModelInstance *m, double current_time, double step_size, const char *call) {
-    if (m->model_exchange) {
-        fmu_fail(m, "%s is a co-simulation function; this instance was instantiated for model exchange", call);
-        return STATUS_ERROR;
+    if (!step_allowed(m, current_time, step_size)) { /* a model exchange instance is never in step mode */
+        if (m->model_exchange) {
+            fmu_fail(m, "%s is a co-simulation function; this instance was instantiated for model exchange", call);
+            return STATUS_ERROR;
+        }
+        return refuse_step(m, current_time, step_size, call);
     }
-    if (!step_allowed(m, current_time, step_size)) return refuse_step(m, current_time, step_size, call);
     if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return STATUS_ERROR;
     if (model_step(m, current_time, step_size) != MODEL_OK) return STATUS_ERROR;
     m->s->time = current_time + step_size;
@@ -364,7 +366,7 @@ static Status get_reals(ModelInstance *m, const unsigned *vr, size_t n, double *
         if (m->outputs_stale && model_compute_outputs(m) != MODEL_OK) return STATUS_ERROR;
         const double *values = m->s->values;
         size_t i = 0;
-        while (i < n && vr[i] < (unsigned)N_VARIABLES && !MODEL_VARIABLES[vr[i]].is_integer) {
+        while (i < n && vr[i] < (unsigned)N_VARIABLES && IS_REAL[vr[i]]) {
             real[i] = values[vr[i]];
             i++;
         }
@@ -440,13 +442,12 @@ static Status set_reals(ModelInstance *m, const unsigned *vr, size_t n, const do
     if (m && m->mode != MODE_TERMINATED) {
         double *values = m->s->values;
         size_t i = 0;
-        while (i < n && vr[i] < (unsigned)N_VARIABLES && MODEL_VARIABLES[vr[i]].causality == CAUSALITY_INPUT &&
-               !MODEL_VARIABLES[vr[i]].is_integer && isfinite(real[i])) {
+        while (i < n && vr[i] < (unsigned)N_VARIABLES && IS_REAL_INPUT[vr[i]] && isfinite(real[i])) {
             values[vr[i]] = real[i];
             i++;
         }
         if (i == n) {
-            if (m->stale_on_set) m->outputs_stale = 1;
+            m->outputs_stale |= m->stale_on_set;
             return STATUS_OK;
         }
     }

@@ -31,10 +31,12 @@ int model_step(ModelInstance *m, double current_time, double step_size) {
     double x[PLANT_STATES];
     int finite = 1;
     for (int s = 0; s < PLANT_STATES; s++) x[s] = state->x[s];
-    if (state->split.step_size != step_size || state->split.max_internal_step != V(m, max_internal_step))
-        state->split = rk4_split(step_size, V(m, max_internal_step));
+    /* max_internal_step is a parameter, fixed from initialisation on (a restored FMU state brings its split) */
+    if (state->split.step_size != step_size) state->split = rk4_split(step_size, V(m, max_internal_step));
     plant_advance(current_time, x, V(m, u), &state->split, state->params);
-    for (int s = 0; s < PLANT_STATES; s++) finite = finite && x[s] - x[s] == 0.0; /* not NaN or inf */
+    double spread = 0.0; /* x - x is 0 for a finite x, NaN for NaN or inf: their sum 0 for finite states alone */
+    for (int s = 0; s < PLANT_STATES; s++) spread += x[s] - x[s];
+    finite = spread == 0.0;
     if (!finite) {
         char start[512];
         size_t used = 0;

@@ -50,7 +50,7 @@ def compile_binary(model: FmuSource, header_dir: Path, fmi_version: int, target:
         # into afc_math.c or plant_integration.h's users) are inlined as within one file; the arithmetic is the
         # same with or without it (-ffp-contract=off, no fast-math).  ELF only: zig links Windows and macOS
         # binaries with linkers that have no LTO
-        arguments += ["-fPIC", "-lm", "-flto"]
+        arguments += ["-fPIC", "-lm", "-flto", *c_toolchain.ELF_FLAGS]
     if target.extension == ".dylib":  # the name a host sees, not the scratch file's path
         arguments.append(f"-Wl,-install_name,@rpath/{model.model_identifier}.dylib")
     arguments += [f"-I{folder}" for folder in includes]

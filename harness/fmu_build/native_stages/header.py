@@ -65,6 +65,15 @@ def variables_header(model_identifier: str, guid: str) -> str:
               "#if defined(__GNUC__)", "__attribute__((unused))", "#endif",
               "static const char *const EXTRA_NAMES[] = {"
               + ", ".join(_c_string(name) for name in extras or ["(none)"]) + "};"]
+    # the per-step checks of fmi2GetReal / fmi2SetReal, one byte per value reference (the table's kind and
+    # causality, read without the stride of VariableInfo)
+    real = [int(v.kind != "Integer") for v in variables]
+    real_input = [int(v.kind != "Integer" and v.causality == "input") for v in variables]
+    lines += ["", "/* per value reference: 1 for a Real (what fmi2GetReal reads), 1 for a Real input (what fmi2SetReal "
+              "sets in step mode) */"]
+    for name, flags in (("IS_REAL", real), ("IS_REAL_INPUT", real_input)):
+        lines += ["#if defined(__GNUC__)", "__attribute__((unused))", "#endif",
+                  f"static const unsigned char {name}[N_VARIABLES] = {{{', '.join(map(str, flags))}}};"]
     lines += ["", "#if defined(__GNUC__)", "__attribute__((unused))", "#endif",
               "static const VariableInfo MODEL_VARIABLES[N_VARIABLES] = {"]
     for v in variables:
