@@ -93,7 +93,7 @@ def run_command(args) -> int:
                   f"{result.wall_s:.2f} s")
         else:
             print(f"{scenario.name} / {args.controller} ({args.algorithm}), step {scenario.step:g} s, "
-                  f"{result.rows - 1} steps in {result.wall_s:.2f} s ({result.us_per_step:.2f} us/step)")
+                  f"{result.rows - 1} steps in {result.wall_s:.2f} s ({result.us_per_step:.3f} us/step)")
         for key in SCORE_KEYS:
             text = value_text(key, scores[key], scenario.start, scenario.stop)
             if key in undefined:

@@ -33,9 +33,10 @@ from .scenario_checks import model_info, resolve_fmu, validate
 ALGORITHMS = ("feedthrough", "jacobi")
 FMI_WARNING = 1
 DIVERGENCE_CHECK_EVERY = 64  # rows; a non-finite value set on an FMU is caught at once
-#: the compiled loop with a progress callback and no progress_every: its first block (rows), then blocks
-#: that last about one tick of the progress display's clock (the count it shows is never older)
-FIRST_PROGRESS_BLOCK = 1024
+#: the compiled loop with a progress callback and no progress_every: its first block (rows), short of one
+#: tick of the progress display's clock even on the slowest FMUs (pythonfmu's, a few tens of us a row) and
+#: a whole short run on the native ones; then blocks that last about one tick (the count it shows is never older)
+FIRST_PROGRESS_BLOCK = 4096
 PROGRESS_BLOCK_S = progress_display.CLOCK_TICK_S
 
 
@@ -420,9 +421,10 @@ class Master:
     def _loop_compiled(self, loop, plan: list, record, progress, every: int):
         """The same rows by harness/master_loop.c, which checks every bound itself: all of them in one
         call when no one follows the progress; else in blocks of ``every`` rows (the caller's progress
-        interval) or, with ``every`` 0, in blocks of about PROGRESS_BLOCK_S of wall time each (sized
-        from the rows per second of the blocks before), with a progress call after each.  Whatever
-        stops it is raised here as _loop_python raises it."""
+        interval), with a progress call after each, or, with ``every`` 0, in blocks of about
+        PROGRESS_BLOCK_S of wall time each (sized from the rows per second of the blocks before), with a
+        progress call between two of them, none after the first (it sizes the next) nor after the last
+        (run() reports the end).  Whatever stops it is raised here as _loop_python raises it."""
         scenario = self.scenario
         steps, step, start = scenario.steps, scenario.step, scenario.start
         components = list(self.components.values())
@@ -438,11 +440,17 @@ class Master:
             outcome = loop.run(start, step, n, last, steps)
             if outcome.outcome != LoopOutcome.DONE:
                 self._raise_stop(outcome, plan, components, record)
+            sizing = n == 0  # the first block of a time-sized run only measures the rows per second
             if progress is not None and not every:
                 rows_per_s = (last - n) / max(clock.perf_counter() - began, 1e-9)
                 block = max(1, int(rows_per_s * PROGRESS_BLOCK_S))
             self.rows_done = n = last
-            if progress is not None and (not every or n % every == 0):
+            if progress is None:
+                continue
+            if every:
+                if n % every == 0:
+                    progress(n, steps)
+            elif not sizing and n < steps:  # a line is due (the run's end is reported by run())
                 progress(n, steps)
 
     def _raise_stop(self, outcome, plan: list, components: list, record):

@@ -443,9 +443,22 @@ def test_a_run_no_one_follows_is_one_call_of_the_compiled_loop(native_fmus, monk
     assert blocks == [(0, 2000)] and result.complete and result.rows == 2001
 
 
+def test_a_short_followed_run_is_one_block_with_its_progress_at_the_end(native_fmus, monkeypatch):
+    """A run the progress display follows but that is shorter than the first block (a cold `run --stop 2` on
+    the native FMUs: 4000 rows) makes one call of the C loop, and the only progress call is Master.run's at
+    the end: no Python inside the timed loop."""
+    blocks = _counted_blocks(monkeypatch)
+    calls = []
+    scenario = scenarios.configure("pendulum_case1", "vud", None, 2.0)  # 4000 steps
+    assert scenario.steps <= master_module.FIRST_PROGRESS_BLOCK
+    Master(scenario, "feedthrough", native_fmus, loop="c").run(progress=lambda done, total: calls.append(done))
+    assert blocks == [(0, 4000)] and calls == [4000]
+
+
 def test_followed_progress_comes_in_blocks_of_wall_time(native_fmus, monkeypatch):
     """With a callback and no progress_every, the first block has FIRST_PROGRESS_BLOCK rows and the next ones
-    last about PROGRESS_BLOCK_S each, sized from the rate so far; one progress call per block, the last at the end."""
+    last about PROGRESS_BLOCK_S each, sized from the rate so far; a progress call between two blocks but after
+    the first (which sizes the next), and Master.run's own at the end."""
     blocks = _counted_blocks(monkeypatch)
     monkeypatch.setattr(master_module, "FIRST_PROGRESS_BLOCK", 100)
     monkeypatch.setattr(master_module, "PROGRESS_BLOCK_S", 0.004)  # a few ms: several blocks in a short run
@@ -455,4 +468,4 @@ def test_followed_progress_comes_in_blocks_of_wall_time(native_fmus, monkeypatch
     assert blocks[0] == (0, 100) and blocks[-1][1] == 10000 and 3 <= len(blocks) < 200
     assert all(first == previous_last for (first, _), (_, previous_last) in zip(blocks[1:], blocks))
     assert max(last - first for first, last in blocks[1:-1]) > 100  # sized from the rate, not by a fixed count
-    assert calls == [last for _, last in blocks] + [10000]  # and Master.run's own final call
+    assert calls == [last for _, last in blocks[1:-1]] + [10000]  # and Master.run's own final call
