@@ -152,8 +152,8 @@ def print_section(rows: list, repeat: int, counts: dict | None = None, stream=No
             whole = {key: int(round(value)) for key, value in figures.items()}  # no "-0" for a difference of 0
             print(f"  {loop:>8s} {whole['total']:7d} {whole['libm']:7d} {whole['fmus']:7d} {whole['loop']:7d} "
                   f"{whole['other']:7d}", file=stream)
-        print(f"  instructions: ours / C host {counts['ours']['total'] / counts['host']['total']:.2f}, "
-              f"C host / floor {counts['host']['total'] / counts['floor']['total']:.2f}", file=stream)
+        print(f"  instructions: ours / C host {counts['ours']['total'] / counts['host']['total']:.3f}, "
+              f"C host / floor {counts['host']['total'] / counts['floor']['total']:.3f}", file=stream)
 
 
 __all__ = ["HORIZONS", "OURS_TO_HOST_TARGET", "HOST_TO_FLOOR_TARGET", "COLD_REPEAT", "horizons", "measure",
