@@ -28,6 +28,7 @@ from harness import scenario as scenarios
 from harness.cases import Case, run_case
 from harness.fmi import Component, FmiError, ModelInfo
 from harness.master import simulate
+from tests.ctrl_c import with_ctrl_c
 from tests.fmu_helpers import Driven
 
 
@@ -148,7 +149,8 @@ def test_a_failed_instantiation_of_the_last_instance_leaves_nothing_of_the_other
 
 def _harness(arguments, temp_dir: Path) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "harness", *arguments], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=dict(os.environ, TMPDIR=str(temp_dir)))
+                            stderr=subprocess.PIPE, text=True, env=dict(os.environ, TMPDIR=str(temp_dir)),
+                            preexec_fn=with_ctrl_c)  # its SIGINT a Ctrl-C whatever this process ignores
 
 
 def _wait_for_unpacked(temp_dir: Path, process, count: int, timeout_s: float = 120.0):

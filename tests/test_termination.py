@@ -15,6 +15,8 @@ from pathlib import Path
 import psutil
 import pytest
 
+from tests.ctrl_c import with_ctrl_c
+
 ROOT = Path(__file__).resolve().parents[1]
 FIRST_LINE_WITHIN_S = 10.0
 
@@ -30,11 +32,6 @@ def descendants_until(process: subprocess.Popen, count: int, timeout_s: float, n
             break
         time.sleep(0.1)
     pytest.fail(f"fewer than {count} {name or 'processes'} under the command within {timeout_s} s")
-
-
-def with_ctrl_c():
-    """A child that takes Ctrl-C as a terminal's does, even when this process was started ignoring it."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def end_tree(command: subprocess.Popen) -> None:
