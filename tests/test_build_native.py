@@ -610,6 +610,23 @@ def test_native_life_cycle_rules(native):
         driven.free()
 
 
+def test_in_step_mode_a_real_access_to_an_integer_is_refused_by_name(native):
+    """The per-step fast paths of fmi2GetReal / fmi2SetReal take Reals only (the Real of an Integer is the
+    layer's own storage, not a value the host may read or set as Real): an Integer goes to the checked path."""
+    driven = Driven(native["AdaptiveFuzzyController"][2])
+    try:
+        driven.initialize()
+        name = next(n for n, kind in driven.types.items() if kind == "Integer")
+        vr = driven.vr[name]
+        expected = f"variable {name} (value reference {vr}) is of type Integer"
+        assert _fail_message(driven, lambda: driven.slave.getReal([driven.vr["u"], vr])) == \
+            f"fmi2GetReal: {expected}"
+        assert _fail_message(driven, lambda: driven.slave.setReal([driven.vr["e"], vr], [0.0, 2.0])) == \
+            f"fmi2SetReal: {expected}"
+    finally:
+        driven.free()
+
+
 # ------------------------------------------------------------------ FMI 3.0
 def test_the_fmi3_controller_matches_the_fmi2_one(native, tmp_path):
     from fmpy.fmi3 import FMU3Slave
