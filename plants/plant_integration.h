@@ -36,13 +36,13 @@ long internal_step_count(double step_size, double max_internal_step);
  * rk4_advance and rk4_advance_states, the same arithmetic).  A plant keeps the split of its step size:
  * a master's communication step is the same at every doStep, and the divisions stay off the per-step path. */
 typedef struct {
-    double step_size, max_internal_step; /* what the split was made for */
+    double step_size; /* what the split was made for (max_internal_step is a parameter: fixed for a run) */
     long n;
     double h, half, sixth;
 } Rk4Split;
 
 static inline Rk4Split rk4_split(double step_size, double max_internal_step) {
-    Rk4Split split = {step_size, max_internal_step, internal_step_count(step_size, max_internal_step), 0.0, 0.0, 0.0};
+    Rk4Split split = {step_size, internal_step_count(step_size, max_internal_step), 0.0, 0.0, 0.0};
     if (split.n == 0) return split;
     split.h = step_size / (double)split.n;
     split.half = 0.5 * split.h;

@@ -29,15 +29,13 @@ void model_construct(ModelInstance *m) { model_initialize(m, m->s->start_time); 
 int model_step(ModelInstance *m, double current_time, double step_size) {
     PlantState *state = PLANT(m);
     double x[PLANT_STATES];
-    int finite = 1;
     for (int s = 0; s < PLANT_STATES; s++) x[s] = state->x[s];
     /* max_internal_step is a parameter, fixed from initialisation on (a restored FMU state brings its split) */
     if (state->split.step_size != step_size) state->split = rk4_split(step_size, V(m, max_internal_step));
     plant_advance(current_time, x, V(m, u), &state->split, state->params);
     double spread = 0.0; /* x - x is 0 for a finite x, NaN for NaN or inf: their sum 0 for finite states alone */
     for (int s = 0; s < PLANT_STATES; s++) spread += x[s] - x[s];
-    finite = spread == 0.0;
-    if (!finite) {
+    if (!(spread == 0.0)) {
         char start[512];
         size_t used = 0;
         for (int s = 0; s < PLANT_STATES && used < sizeof start; s++)
