@@ -627,6 +627,21 @@ def test_in_step_mode_a_real_access_to_an_integer_is_refused_by_name(native):
         driven.free()
 
 
+def test_an_overflow_of_the_last_modified_error_alone_fails_the_outputs(native):
+    """The outputs' finiteness test sums u and every E^(i) (unrolled for the paper's shape): dE alone
+    overflowing (de(0) latched at -1.7e308, de then +1.7e308; u and E stay finite) fails the call, and
+    no inf reaches the host."""
+    driven = Driven(native["AdaptiveFuzzyController"][2])
+    try:
+        driven.initialize(e=0.0, de=-1.7e308)
+        driven.slave.doStep(0.0, 1e-4)
+        driven.set(de=1.7e308)
+        message = _fail_message(driven, lambda: driven.get("u", "E", "dE"))
+        assert message.startswith("outputs overflow at t = 0.0001: u = 0, E = (") and ", inf) from e = 0" in message
+    finally:
+        driven.free()
+
+
 # ------------------------------------------------------------------ FMI 3.0
 def test_the_fmi3_controller_matches_the_fmi2_one(native, tmp_path):
     from fmpy.fmi3 import FMU3Slave
